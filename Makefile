@@ -1,0 +1,38 @@
+# bayes_amb: everything a fresh clone needs, from nothing.
+#   make demo   - create .venv (Python >= 3.12), install, run the end-to-end demo
+#   make test   - same set-up, then the default test suite
+#   make bench  - the benchmarks (ratios against a baseline run side by side)
+SHELL := /bin/bash
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test bench lint clean venv
+
+venv: $(STAMP)
+
+$(STAMP): pyproject.toml tools/find-python.sh
+	@set -e; \
+	if [ ! -x $(PY) ] || ! $(PY) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 12) else 1)' 2>/dev/null; then \
+	  base=$$(tools/find-python.sh); \
+	  echo "creating $(VENV) with $$base"; \
+	  rm -rf $(VENV); "$$base" -m venv $(VENV); \
+	fi
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+demo: $(STAMP)
+	$(VENV)/bin/bayes-amb model
+
+test: $(STAMP)
+	$(PY) -m pytest -q
+
+bench: $(STAMP)
+	$(VENV)/bin/bayes-amb bench
+
+lint: $(STAMP)
+	$(PY) -m ruff check bayes_amb tests
+
+clean:
+	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -1,0 +1,73 @@
+"""Entry point of the `bayes-amb` console script.
+
+User errors (BayesAmbError, bad options, missing files) give one line on stderr and exit
+status 2, never a traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+from bayes_amb import __version__
+from bayes_amb.errors import BayesAmbError
+
+
+class _OneLineParser(argparse.ArgumentParser):
+    """ArgumentParser whose errors are a single line and exit status 2."""
+
+    def error(self, message: str) -> None:  # type: ignore[override]
+        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        raise SystemExit(2)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from bayes_amb.cli import model_cmd, params_cmd
+
+    parser = _OneLineParser(prog="bayes-amb", description="Bayesian closed-loop "
+                            "identification of rotors on active magnetic bearings.")
+    parser.add_argument("--version", action="version", version=f"bayes-amb {__version__}")
+    parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_OneLineParser)
+    for mod in (model_cmd, params_cmd):
+        mod.add_parser(sub)
+    _add_optional_commands(sub)
+    return parser
+
+
+def _add_optional_commands(sub: argparse._SubParsersAction) -> None:
+    """Commands of later pipeline stages register here when their modules exist."""
+    import importlib
+
+    for name in ("controller_cmd", "simulate_cmd", "identify_cmd", "bench_cmd"):
+        try:
+            mod = importlib.import_module(f"bayes_amb.cli.{name}")
+        except ModuleNotFoundError as exc:
+            if exc.name != f"bayes_amb.cli.{name}":
+                raise
+            continue
+        mod.add_parser(sub)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except BayesAmbError as exc:
+        sys.stderr.write(f"bayes-amb {args.command}: error: {exc}\n")
+        return 2
+    except OSError as exc:
+        sys.stderr.write(f"bayes-amb {args.command}: error: {exc.filename or ''}: "
+                         f"{exc.strerror or exc}\n")
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

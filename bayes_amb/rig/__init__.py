@@ -1,0 +1,5 @@
+"""Rig description: the reference turboexpander and user rig files (TOML)."""
+
+from bayes_amb.rig.rig import CHANNELS, Disc, Rig, Shaft, load_rig, rig_from_dict
+
+__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "load_rig", "rig_from_dict"]

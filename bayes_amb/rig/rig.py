@@ -1,0 +1,269 @@
+"""The rig: geometry, materials, discs, bearings and sensors, read from a TOML file.
+
+A rig file is the single description of a machine that every other stage reads. The
+reference rig ships inside the package (``reference``); any other rig is a TOML file of
+the same form (see README, "Writing a rig file").
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from bayes_amb.errors import RigError
+
+CHANNELS: tuple[str, ...] = ("Ax", "Ay", "Bx", "By")
+"""Channel names of inputs (currents) and outputs (displacements), in this order."""
+
+
+@dataclass(frozen=True)
+class Shaft:
+    """Uniform solid shaft, Euler-Bernoulli elements.
+
+    Attributes are SI: youngs_modulus in Pa, density in kg/m^3, diameter and length in m.
+    """
+
+    youngs_modulus: float
+    density: float
+    poisson: float
+    diameter: float
+    length: float
+    n_nodes: int
+
+    @property
+    def area(self) -> float:
+        """Cross-section area, m^2."""
+        return math.pi * self.diameter**2 / 4.0
+
+    @property
+    def second_moment(self) -> float:
+        """Second moment of area I, m^4."""
+        return math.pi * self.diameter**4 / 64.0
+
+    @property
+    def node_z(self) -> list[float]:
+        """Axial node positions, m, node 1 at z = 0."""
+        h = self.length / (self.n_nodes - 1)
+        return [i * h for i in range(self.n_nodes)]
+
+
+@dataclass(frozen=True)
+class Disc:
+    """Rigid disc at a node: mass in kg, polar ip and diametral id inertia in kg m^2."""
+
+    name: str
+    node: int
+    mass: float
+    ip: float
+    id: float
+
+
+@dataclass(frozen=True)
+class Rig:
+    """A rotor-AMB rig. Node numbers are 1-based as in the rig file.
+
+    bearing_nodes and sensor_nodes map the bearing names ("A", "B") to nodes; each has an
+    x and a y axis, giving the channels Ax, Ay, Bx, By.
+    """
+
+    name: str
+    description: str
+    shaft: Shaft
+    discs: tuple[Disc, ...]
+    ki: float
+    ks: float
+    bearing_nodes: dict[str, int]
+    sensor_nodes: dict[str, int]
+    first_mode_zeta: float
+    nominal_speed_rpm: float
+    c_ref: float
+    k_ref: float
+    source: str = "<built-in>"
+
+    @property
+    def n_nodes(self) -> int:
+        return self.shaft.n_nodes
+
+    def disc(self, name: str) -> Disc:
+        for d in self.discs:
+            if d.name == name:
+                return d
+        raise RigError(f"rig {self.source}: no disc named {name!r}; discs are "
+                       f"{[d.name for d in self.discs]}")
+
+    def to_dict(self) -> dict[str, Any]:
+        """The rig as a plain dict in rig-file form (for embedding in JSON sidecars)."""
+        s = self.shaft
+        return {
+            "name": self.name,
+            "description": self.description,
+            "shaft": {"youngs_modulus": s.youngs_modulus, "density": s.density,
+                      "poisson": s.poisson, "diameter": s.diameter, "length": s.length,
+                      "n_nodes": s.n_nodes},
+            "discs": [{"name": d.name, "node": d.node, "mass": d.mass, "ip": d.ip,
+                       "id": d.id} for d in self.discs],
+            "bearings": {"ki": self.ki, "ks": self.ks,
+                         **{k: {"node": v} for k, v in self.bearing_nodes.items()}},
+            "sensors": {k: {"node": v} for k, v in self.sensor_nodes.items()},
+            "damping": {"first_mode_zeta": self.first_mode_zeta},
+            "operation": {"nominal_speed_rpm": self.nominal_speed_rpm},
+            "uncertainty": {"c_ref": self.c_ref, "k_ref": self.k_ref},
+        }
+
+
+_TOP_KEYS = {"name", "description", "shaft", "discs", "bearings", "sensors", "damping",
+             "operation", "uncertainty"}
+_SHAFT_KEYS = {"youngs_modulus", "density", "poisson", "diameter", "length", "n_nodes"}
+_DISC_KEYS = {"name", "node", "mass", "ip", "id"}
+
+
+class _Reader:
+    """Reads fields from a parsed rig table and raises RigError naming file and field."""
+
+    def __init__(self, source: str):
+        self.source = source
+
+    def fail(self, field: str, msg: str) -> RigError:
+        return RigError(f"rig file {self.source}: field {field}: {msg}")
+
+    def table(self, data: dict, key: str, field: str, allowed: set[str] | None = None) -> dict:
+        if key not in data:
+            raise self.fail(field, "missing")
+        t = data[key]
+        if not isinstance(t, dict):
+            raise self.fail(field, f"expected a table, got {t!r}")
+        if allowed is not None:
+            extra = sorted(set(t) - allowed)
+            if extra:
+                raise self.fail(f"{field}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
+        return t
+
+    def number(self, t: dict, key: str, field: str, *, positive: bool = True,
+               nonneg: bool = False, upper: float | None = None) -> float:
+        if key not in t:
+            raise self.fail(field, "missing")
+        v = t[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+            raise self.fail(field, f"expected a finite number, got {v!r}")
+        if positive and not nonneg and v <= 0:
+            raise self.fail(field, f"expected a positive value, got {v!r}")
+        if nonneg and v < 0:
+            raise self.fail(field, f"expected a non-negative value, got {v!r}")
+        if upper is not None and v >= upper:
+            raise self.fail(field, f"expected a value below {upper}, got {v!r}")
+        return float(v)
+
+    def node(self, t: dict, key: str, field: str, n_nodes: int) -> int:
+        if key not in t:
+            raise self.fail(field, "missing")
+        v = t[key]
+        if isinstance(v, bool) or not isinstance(v, int):
+            raise self.fail(field, f"expected an integer node number, got {v!r}")
+        if not 1 <= v <= n_nodes:
+            raise self.fail(field, f"node {v} out of range 1..{n_nodes}")
+        return v
+
+
+def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
+    """Build and validate a Rig from a rig-file dict; raises RigError naming the field."""
+    r = _Reader(source)
+    if not isinstance(data, dict):
+        raise r.fail("<top>", f"expected a table, got {type(data).__name__}")
+    extra = sorted(set(data) - _TOP_KEYS)
+    if extra:
+        raise r.fail(extra[0], f"unknown key (allowed: {sorted(_TOP_KEYS)})")
+    name = data.get("name", Path(source).stem)
+    if not isinstance(name, str) or not name:
+        raise r.fail("name", f"expected a non-empty string, got {name!r}")
+    sh = r.table(data, "shaft", "shaft", _SHAFT_KEYS)
+    n_nodes = sh.get("n_nodes")
+    if isinstance(n_nodes, bool) or not isinstance(n_nodes, int) or n_nodes < 2:
+        raise r.fail("shaft.n_nodes", f"expected an integer >= 2, got {n_nodes!r}")
+    shaft = Shaft(
+        youngs_modulus=r.number(sh, "youngs_modulus", "shaft.youngs_modulus"),
+        density=r.number(sh, "density", "shaft.density"),
+        poisson=r.number(sh, "poisson", "shaft.poisson", nonneg=True, upper=0.5),
+        diameter=r.number(sh, "diameter", "shaft.diameter"),
+        length=r.number(sh, "length", "shaft.length"),
+        n_nodes=n_nodes,
+    )
+    discs_raw = data.get("discs", [])
+    if not isinstance(discs_raw, list):
+        raise r.fail("discs", f"expected an array of tables, got {discs_raw!r}")
+    discs = []
+    for i, d in enumerate(discs_raw):
+        f = f"discs[{i}]"
+        if not isinstance(d, dict):
+            raise r.fail(f, f"expected a table, got {d!r}")
+        bad = sorted(set(d) - _DISC_KEYS)
+        if bad:
+            raise r.fail(f"{f}.{bad[0]}", f"unknown key (allowed: {sorted(_DISC_KEYS)})")
+        dname = d.get("name", f"D{i + 1}")
+        if not isinstance(dname, str) or not dname:
+            raise r.fail(f"{f}.name", f"expected a non-empty string, got {dname!r}")
+        discs.append(Disc(
+            name=dname,
+            node=r.node(d, "node", f"{f}.node", n_nodes),
+            mass=r.number(d, "mass", f"{f}.mass"),
+            ip=r.number(d, "ip", f"{f}.ip", nonneg=True),
+            id=r.number(d, "id", f"{f}.id", nonneg=True),
+        ))
+    if len({d.name for d in discs}) != len(discs):
+        raise r.fail("discs", "disc names must be unique")
+    bt = r.table(data, "bearings", "bearings", {"ki", "ks", "A", "B"})
+    ki = r.number(bt, "ki", "bearings.ki")
+    ks = r.number(bt, "ks", "bearings.ks", nonneg=True)
+    bearing_nodes = {}
+    sensor_nodes = {}
+    st = r.table(data, "sensors", "sensors", {"A", "B"})
+    for b in ("A", "B"):
+        bearing_nodes[b] = r.node(r.table(bt, b, f"bearings.{b}", {"node"}), "node",
+                                  f"bearings.{b}.node", n_nodes)
+        sensor_nodes[b] = r.node(r.table(st, b, f"sensors.{b}", {"node"}), "node",
+                                 f"sensors.{b}.node", n_nodes)
+    if bearing_nodes["A"] == bearing_nodes["B"]:
+        raise r.fail("bearings.B.node", f"bearings A and B share node {bearing_nodes['A']}")
+    dt_ = r.table(data, "damping", "damping", {"first_mode_zeta"})
+    zeta = r.number(dt_, "first_mode_zeta", "damping.first_mode_zeta", nonneg=True, upper=1.0)
+    op = r.table(data, "operation", "operation", {"nominal_speed_rpm"})
+    speed = r.number(op, "nominal_speed_rpm", "operation.nominal_speed_rpm", nonneg=True)
+    un = data.get("uncertainty", {"c_ref": 1000.0, "k_ref": 1.0e5})
+    if not isinstance(un, dict):
+        raise r.fail("uncertainty", f"expected a table, got {un!r}")
+    bad = sorted(set(un) - {"c_ref", "k_ref"})
+    if bad:
+        raise r.fail(f"uncertainty.{bad[0]}", "unknown key (allowed: ['c_ref', 'k_ref'])")
+    c_ref = r.number({"c_ref": 1000.0, **un}, "c_ref", "uncertainty.c_ref")
+    k_ref = r.number({"k_ref": 1.0e5, **un}, "k_ref", "uncertainty.k_ref")
+    desc = data.get("description", "")
+    if not isinstance(desc, str):
+        raise r.fail("description", f"expected a string, got {desc!r}")
+    return Rig(name=name, description=desc, shaft=shaft, discs=tuple(discs), ki=ki, ks=ks,
+               bearing_nodes=bearing_nodes, sensor_nodes=sensor_nodes, first_mode_zeta=zeta,
+               nominal_speed_rpm=speed, c_ref=c_ref, k_ref=k_ref, source=source)
+
+
+def load_rig(path: str | Path | None = None) -> Rig:
+    """Load a rig: None or "reference" gives the shipped reference rig, else a TOML path.
+
+    Examples
+    --------
+    >>> rig = load_rig()
+    >>> rig.n_nodes, rig.bearing_nodes["B"]
+    (40, 33)
+    """
+    if path is None or str(path) == "reference":
+        text = resources.files("bayes_amb.rig").joinpath("data/reference.toml").read_text()
+        return rig_from_dict(tomllib.loads(text), source="reference")
+    p = Path(path)
+    if not p.is_file():
+        raise RigError(f"rig file {p}: field <file>: not found")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise RigError(f"rig file {p}: field <toml>: not valid TOML ({exc})") from None
+    return rig_from_dict(data, source=str(p))

@@ -1,0 +1,188 @@
+"""Global FE matrices and the full state-space model of eq. 17.
+
+    x_f' = A_f x_f + B_f u,   y = C_f x_f,   x_f = [q; q'] (positions, then velocities)
+
+    A_f = [[0, I], [-M^-1 (K_shaft - ks*P_b), -M^-1 (C + Omega*G)]]
+
+u are the control currents [Ax, Ay, Bx, By] in A (bearing force ki*u) and y the sensor
+displacements [Ax, Ay, Bx, By] in m. P_b puts ks on the bearing translational DOFs (eq. 16:
+f = ki*i + ks*s, a spring of negative stiffness -ks).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import NDArray
+
+from bayes_amb.rig import CHANNELS, Rig
+from bayes_amb.rotor.elements import disc_matrices, shaft_element
+
+_AXIS_OFFSET = {"x": 0, "y": 1, "tx": 2, "ty": 3}
+DOF_PER_NODE = 4
+
+
+def dof_index(node: int, axis: str) -> int:
+    """Global DOF index (0-based) of a 1-based node and an axis in {x, y, tx, ty}."""
+    return DOF_PER_NODE * (node - 1) + _AXIS_OFFSET[axis]
+
+
+def channel_dofs(nodes: dict[str, int]) -> list[int]:
+    """DOF indices of the channels Ax, Ay, Bx, By at the given bearing or sensor nodes."""
+    return [dof_index(nodes[ch[0]], ch[1]) for ch in CHANNELS]
+
+
+@dataclass(frozen=True)
+class RotorMatrices:
+    """Global second-order matrices, each (n_q, n_q) with n_q = 4 * n_nodes.
+
+    M in kg (kg m^2 on rotations), K_shaft in N/m, C in N s/m (C = beta*K_shaft),
+    G gyroscopic per rad/s of spin (multiply by Omega), K_bearing = -ks on bearing DOFs,
+    Bq (n_q, 4) maps currents to forces (ki), Cq (4, n_q) picks sensor displacements.
+    """
+
+    M: NDArray
+    K_shaft: NDArray
+    C: NDArray
+    G: NDArray
+    K_bearing: NDArray
+    Bq: NDArray
+    Cq: NDArray
+    beta: float
+
+    @property
+    def n_q(self) -> int:
+        return self.M.shape[0]
+
+    @cached_property
+    def M_inv(self) -> NDArray:
+        return np.linalg.inv(self.M)
+
+    @property
+    def K(self) -> NDArray:
+        """Total stiffness K_shaft + K_bearing (bearing negative stiffness included)."""
+        return self.K_shaft + self.K_bearing
+
+
+def shaft_matrices(rig: Rig) -> tuple[NDArray, NDArray, NDArray]:
+    """Bare-shaft M, K and G (no discs, no bearings), each (4 n_nodes, 4 n_nodes)."""
+    s = rig.shaft
+    n_q = DOF_PER_NODE * s.n_nodes
+    M = np.zeros((n_q, n_q))
+    K = np.zeros((n_q, n_q))
+    G = np.zeros((n_q, n_q))
+    le = s.length / (s.n_nodes - 1)
+    Me, Ke, Ge = shaft_element(le, s.youngs_modulus, s.density, s.area, s.second_moment)
+    for e in range(s.n_nodes - 1):
+        idx = slice(DOF_PER_NODE * e, DOF_PER_NODE * (e + 2))
+        M[idx, idx] += Me
+        K[idx, idx] += Ke
+        G[idx, idx] += Ge
+    return M, K, G
+
+
+def first_free_free_bending(M: NDArray, K: NDArray) -> float:
+    """First non-rigid natural frequency (rad/s) of an unsupported structure (M, K)."""
+    w2 = sla.eigh(K, M, eigvals_only=True)
+    w2 = np.sort(w2)
+    scale = max(abs(w2[-1]), 1.0)
+    flexible = w2[w2 > 1e-9 * scale]
+    return float(np.sqrt(flexible[0]))
+
+
+def assemble(rig: Rig) -> RotorMatrices:
+    """Assemble the global matrices of a rig (discs and bearings included).
+
+    Examples
+    --------
+    >>> from bayes_amb.rig import load_rig
+    >>> m = assemble(load_rig())
+    >>> m.n_q
+    160
+    """
+    M, K, G = shaft_matrices(rig)
+    beta = 2.0 * rig.first_mode_zeta / first_free_free_bending(M, K)
+    C = beta * K
+    for d in rig.discs:
+        Md, Gd = disc_matrices(d.mass, d.ip, d.id)
+        idx = slice(dof_index(d.node, "x"), dof_index(d.node, "x") + DOF_PER_NODE)
+        M[idx, idx] += Md
+        G[idx, idx] += Gd
+    n_q = M.shape[0]
+    K_b = np.zeros((n_q, n_q))
+    b_dofs = channel_dofs(rig.bearing_nodes)
+    for j in b_dofs:
+        K_b[j, j] -= rig.ks
+    Bq = np.zeros((n_q, len(CHANNELS)))
+    for k, j in enumerate(b_dofs):
+        Bq[j, k] = rig.ki
+    Cq = np.zeros((len(CHANNELS), n_q))
+    for k, j in enumerate(channel_dofs(rig.sensor_nodes)):
+        Cq[k, j] = 1.0
+    return RotorMatrices(M=M, K_shaft=K, C=C, G=G, K_bearing=K_b, Bq=Bq, Cq=Cq, beta=beta)
+
+
+@dataclass(frozen=True)
+class FullModel:
+    """The full-order state-space model of eq. 17 at one speed.
+
+    A (2 n_q, 2 n_q) in 1/s, B (2 n_q, 4) per A, C (4, 2 n_q) in m per state unit.
+    """
+
+    A: NDArray
+    B: NDArray
+    C: NDArray
+    speed_rpm: float
+    matrices: RotorMatrices
+
+    @property
+    def n_states(self) -> int:
+        return self.A.shape[0]
+
+    @cached_property
+    def poles(self) -> NDArray:
+        """Open-loop poles, rad/s, sorted by modulus."""
+        lam = np.linalg.eigvals(self.A)
+        return lam[np.argsort(np.abs(lam), kind="stable")]
+
+
+def rpm_to_rad_s(rpm: float) -> float:
+    return float(rpm) * 2.0 * np.pi / 60.0
+
+
+def state_matrices(mats: RotorMatrices, speed_rpm: float, dK: NDArray | None = None,
+                   dC: NDArray | None = None) -> tuple[NDArray, NDArray, NDArray]:
+    """(A_f, B_f, C_f) of eq. 17, optionally with extra stiffness dK and damping dC (n_q x n_q)."""
+    n_q = mats.n_q
+    K = mats.K if dK is None else mats.K + dK
+    Cd = mats.C + rpm_to_rad_s(speed_rpm) * mats.G
+    if dC is not None:
+        Cd = Cd + dC
+    Mi = mats.M_inv
+    A = np.zeros((2 * n_q, 2 * n_q))
+    A[:n_q, n_q:] = np.eye(n_q)
+    A[n_q:, :n_q] = -Mi @ K
+    A[n_q:, n_q:] = -Mi @ Cd
+    B = np.vstack([np.zeros((n_q, mats.Bq.shape[1])), Mi @ mats.Bq])
+    C = np.hstack([mats.Cq, np.zeros_like(mats.Cq)])
+    return A, B, C
+
+
+def full_model(rig: Rig, speed_rpm: float | None = None, mats: RotorMatrices | None = None,
+               ) -> FullModel:
+    """Full FE state-space model (eq. 17) of a rig at a speed (default: nominal speed).
+
+    Examples
+    --------
+    >>> from bayes_amb.rig import load_rig
+    >>> fm = full_model(load_rig())
+    >>> fm.n_states, fm.B.shape, fm.C.shape
+    (320, (320, 4), (4, 320))
+    """
+    speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
+    mats = assemble(rig) if mats is None else mats
+    A, B, C = state_matrices(mats, speed)
+    return FullModel(A=A, B=B, C=C, speed_rpm=speed, matrices=mats)

@@ -1,0 +1,13 @@
+"""Physical parameter uncertainty as an LFT, full and reduced (eqs. 46-52)."""
+
+from bayes_amb.uncertainty.lft import UncertainPlant, lft_full, lft_reduced, lower_lft
+from bayes_amb.uncertainty.parameters import (
+    PARAMETERS,
+    ParameterSpec,
+    get_spec,
+    parse_param_list,
+    physical_change,
+)
+
+__all__ = ["PARAMETERS", "ParameterSpec", "UncertainPlant", "get_spec", "lft_full",
+           "lft_reduced", "lower_lft", "parse_param_list", "physical_change"]

@@ -1,0 +1,162 @@
+"""The public vocabulary of uncertain physical parameters.
+
+Each name is a change of the physical model that changes one or two columns of A_f
+(eqs. 48-50). theta is dimensionless; the physical value is reported beside it.
+
+Sign conventions
+----------------
+k_Ax, k_Ay, k_Bx, k_By
+    Relative *reduction* of the bearing's position stiffness ks on that axis:
+    ks_true = (1 - theta) * ks. theta = 0.5 is "a stiffness reduction of 50 %" (the paper's
+    case), theta = 1 removes ks (a 100 % change), theta < 0 makes the bearing more unstable.
+    Physical value: delta_ks = ks_true - ks = -theta * ks, in N/m.
+c_Ax, c_Ay, c_Bx, c_By
+    Viscous damping added at that bearing axis: c = theta * c_ref, in N s/m.
+kxy_A, kxy_B, kxy_D1, kxy_D2
+    Destabilising cross-coupled stiffness at bearing A, B or disc D1, D2 (seal or
+    aerodynamic kind): f_x = -kxy*y, f_y = +kxy*x with kxy = theta * k_ref, in N/m. Each uses
+    two columns of A_f (the x and y DOFs of its node).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.errors import ParameterError
+from bayes_amb.rig import Rig
+from bayes_amb.rotor import RotorMatrices, dof_index
+
+
+@dataclass(frozen=True)
+class ParameterSpec:
+    """One named parameter: what it changes, its physical scale and unit."""
+
+    name: str
+    kind: str          # "k", "c" or "kxy"
+    location: str      # "A", "B", "D1", "D2"
+    axis: str | None   # "x"/"y" for k and c; None for kxy
+    meaning: str
+    unit: str
+    physical_label: str
+
+    def physical_scale(self, rig: Rig) -> float:
+        """Physical value per unit theta (N/m or N s/m)."""
+        if self.kind == "k":
+            return -rig.ks
+        if self.kind == "c":
+            return rig.c_ref
+        return rig.k_ref
+
+    def to_physical(self, theta: float | NDArray, rig: Rig) -> float | NDArray:
+        return np.asarray(theta) * self.physical_scale(rig)
+
+
+def _build_vocabulary() -> dict[str, ParameterSpec]:
+    vocab: dict[str, ParameterSpec] = {}
+    for b in ("A", "B"):
+        for ax in ("x", "y"):
+            vocab[f"k_{b}{ax}"] = ParameterSpec(
+                f"k_{b}{ax}", "k", b, ax,
+                f"relative reduction of bearing {b} ks on axis {ax}: ks_true = (1-theta) ks",
+                "N/m", "delta_ks")
+    for b in ("A", "B"):
+        for ax in ("x", "y"):
+            vocab[f"c_{b}{ax}"] = ParameterSpec(
+                f"c_{b}{ax}", "c", b, ax,
+                f"viscous damping added at bearing {b} axis {ax}: c = theta c_ref",
+                "N s/m", "c")
+    for loc, what in (("A", "bearing A"), ("B", "bearing B"), ("D1", "disc D1"),
+                      ("D2", "disc D2")):
+        vocab[f"kxy_{loc}"] = ParameterSpec(
+            f"kxy_{loc}", "kxy", loc, None,
+            f"cross-coupled stiffness at {what}: f_x = -kxy y, f_y = +kxy x, kxy = theta k_ref",
+            "N/m", "kxy")
+    return vocab
+
+
+PARAMETERS: dict[str, ParameterSpec] = _build_vocabulary()
+"""All parameter names in their canonical order."""
+
+
+def get_spec(name: str) -> ParameterSpec:
+    if name not in PARAMETERS:
+        raise ParameterError(f"unknown parameter name {name!r}; known: {', '.join(PARAMETERS)}")
+    return PARAMETERS[name]
+
+
+def parse_param_list(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]:
+    """'k_By,c_By' -> ('k_By', 'c_By'), checking names and duplicates."""
+    names = [s.strip() for s in text.split(",")] if isinstance(text, str) else list(text)
+    names = [n for n in names if n]
+    if not names:
+        raise ParameterError("parameter list is empty")
+    for n in names:
+        get_spec(n)
+    if len(set(names)) != len(names):
+        raise ParameterError(f"parameter list {names} has duplicates")
+    return tuple(names)
+
+
+def node_of(spec: ParameterSpec, rig: Rig) -> int:
+    """1-based node where a parameter acts."""
+    if spec.location in rig.bearing_nodes:
+        return rig.bearing_nodes[spec.location]
+    return rig.disc(spec.location).node
+
+
+def physical_change(spec: ParameterSpec, rig: Rig, theta: float,
+                    n_q: int) -> tuple[NDArray, NDArray]:
+    """(dK, dC), each (n_q, n_q): the change of the second-order matrices at theta.
+
+    This is the physical definition; the LFT columns are derived from it and tested
+    against it.
+    """
+    dK = np.zeros((n_q, n_q))
+    dC = np.zeros((n_q, n_q))
+    node = node_of(spec, rig)
+    if spec.kind == "k":
+        j = dof_index(node, spec.axis)
+        dK[j, j] = theta * rig.ks          # K_bearing = -(1 - theta) ks = -ks + theta ks
+    elif spec.kind == "c":
+        j = dof_index(node, spec.axis)
+        dC[j, j] = theta * rig.c_ref
+    else:
+        jx, jy = dof_index(node, "x"), dof_index(node, "y")
+        kxy = theta * rig.k_ref
+        dK[jx, jy] = kxy                   # f_x = -kxy y
+        dK[jy, jx] = -kxy                  # f_y = +kxy x
+    return dK, dC
+
+
+def lft_columns(spec: ParameterSpec, rig: Rig, mats: RotorMatrices) -> tuple[NDArray, NDArray]:
+    """(B_w_f, C_z_f) of one parameter (eqs. 49-50): shapes (2 n_q, r) and (r, 2 n_q).
+
+    A_f(theta) = A_f + B_w_f * theta * C_z_f, with r = 1 (k, c) or 2 (kxy).
+    """
+    n_q = mats.n_q
+    Mi = mats.M_inv
+    node = node_of(spec, rig)
+    cols, rows = [], []
+    if spec.kind in ("k", "c"):
+        j = dof_index(node, spec.axis)
+        value = rig.ks if spec.kind == "k" else rig.c_ref
+        col = np.zeros(2 * n_q)
+        col[n_q:] = -Mi[:, j] * value
+        row = np.zeros(2 * n_q)
+        row[j if spec.kind == "k" else n_q + j] = 1.0
+        cols.append(col)
+        rows.append(row)
+    else:
+        jx, jy = dof_index(node, "x"), dof_index(node, "y")
+        for src, dst, sign in ((jy, jx, 1.0), (jx, jy, -1.0)):
+            # dK[dst, src] = sign * k_ref -> A column src gets -M^-1 e_dst sign k_ref
+            col = np.zeros(2 * n_q)
+            col[n_q:] = -Mi[:, dst] * sign * rig.k_ref
+            row = np.zeros(2 * n_q)
+            row[src] = 1.0
+            cols.append(col)
+            rows.append(row)
+    return np.column_stack(cols), np.vstack(rows)
