@@ -1,0 +1,100 @@
+"""Closed-loop simulation of a continuous truth plant under a discrete controller.
+
+Signals (Fig. 2 of the paper) at sample k:
+
+    y_meas = sensor_gain * C x + n          recorded displacement (sensor noise n)
+    y_c    = y_meas + r1                    what the controller sees (r1: sensor-side)
+    [u; eps_c] = controller([y_c; eta])     eta: the controller's excitation port
+    u_plant = u + r2                        r2: actuator-side disturbance (not recorded)
+    x+      = exact ZOH of the plant over one sample, with the input delayed by delay_s
+
+The recorded current is the controller output u (it includes eta when the controller adds
+it at its output, as a generic controller's exported form does).
+The delay tau = m dt + phi (0 <= phi < dt) is exact under ZOH:
+x[k+1] = Ad x[k] + Gamma(dt - phi) u[k-m] + e^{A(dt-phi)} Gamma(phi) u[k-m-1].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.control.discrete import zoh
+from bayes_amb.simulate.truth import TruthPlant
+
+
+@dataclass(frozen=True)
+class LoopSignals:
+    """Simulated signals, each (n, 4): recorded y (m) and u (A), controller eps (m)."""
+
+    y: NDArray
+    u: NDArray
+    eps: NDArray
+    unstable: bool
+
+
+def delayed_input_matrices(A: NDArray, B: NDArray, dt: float, delay_s: float
+                           ) -> tuple[NDArray, int, NDArray, NDArray]:
+    """(Ad, m, G_now, G_prev): u[k-m] enters through G_now and u[k-m-1] through G_prev."""
+    m = int(np.floor(delay_s / dt + 1e-12))
+    phi = delay_s - m * dt
+    Ad, G_full = zoh(A, B, dt)
+    if phi <= 1e-15 * dt:
+        return Ad, m, G_full, np.zeros_like(G_full)
+    E1, G_rest = zoh(A, B, dt - phi)
+    _, G_phi = zoh(A, B, phi)
+    return Ad, m, G_rest, E1 @ G_phi
+
+
+def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray, NDArray],
+                  dt: float, eta: NDArray, noise: NDArray | None = None,
+                  r1: NDArray | None = None, r2: NDArray | None = None) -> LoopSignals:
+    """Run the loop for len(eta) samples from rest. controller = (Ak, Bk, Ck, Dk) with
+    inputs [y (4); eta (4)] and outputs [u (4); eps (4)].
+    """
+    n = eta.shape[0]
+    zeros = np.zeros_like(eta)
+    noise = zeros if noise is None else noise
+    r1 = zeros if r1 is None else r1
+    r2 = zeros if r2 is None else r2
+    Ak, Bk, Ck, Dk = (np.asarray(m, dtype=float) for m in controller)
+    Ad, m_del, G_now, G_prev = delayed_input_matrices(truth.A, truth.B, dt, truth.delay_s)
+    Cg = truth.sensor_gain[:, None] * truth.C
+    # unbalance: sampled forward-whirl force, held over each sample (ZOH)
+    force_term = np.zeros((n, truth.n_states))
+    if truth.B_f is not None and truth.unbalance is not None:
+        _, Gf = zoh(truth.A, truth.B_f, dt)
+        amp, ph = truth.unbalance
+        omega = truth.speed_rpm * 2 * np.pi / 60
+        t = np.arange(n) * dt
+        f = amp * np.column_stack([np.cos(omega * t + ph), np.sin(omega * t + ph)])
+        force_term = f @ Gf.T
+    x = np.zeros(truth.n_states)
+    xk = np.zeros(Ak.shape[0])
+    u_hist = np.zeros((n + m_del + 1, truth.B.shape[1]))   # u_hist[k + m_del + 1] = u_plant[k]
+    y_rec = np.empty((n, 4))
+    u_rec = np.empty((n, 4))
+    eps = np.empty((n, 4))
+    v = np.empty(8)
+    unstable = False
+    off = m_del + 1
+    for k in range(n):
+        y = Cg @ x + noise[k]
+        v[:4] = y + r1[k]
+        v[4:] = eta[k]
+        out = Ck @ xk + Dk @ v
+        xk = Ak @ xk + Bk @ v
+        y_rec[k] = y
+        u_rec[k] = out[:4]
+        eps[k] = out[4:]
+        u_hist[k + off] = out[:4] + r2[k]
+        x = Ad @ x + G_now @ u_hist[k + off - m_del] + G_prev @ u_hist[k + off - m_del - 1] \
+            + force_term[k]
+        if k % 256 == 0 and not np.all(np.isfinite(x)):
+            unstable = True
+            break
+    if unstable or not np.all(np.isfinite(y_rec)):
+        unstable = True
+    return LoopSignals(y=y_rec, u=u_rec, eps=eps, unstable=unstable)

@@ -1,0 +1,84 @@
+"""Excitation and disturbance signals. Every generator takes a numpy Generator (rng).
+
+Amplitudes are physical: currents in A, displacements in m. Signals are arrays of shape
+(n_samples, n_channels).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.signal as sps
+from numpy.typing import NDArray
+
+from bayes_amb.errors import BayesAmbError
+
+EXCITATIONS = ("random-binary", "prbs", "multisine")
+
+
+def random_binary(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
+                  hold: int = 1) -> NDArray:
+    """Random binary signal +/-amplitude, each level held for ``hold`` samples (the paper's)."""
+    k = -(-n // hold)
+    levels = rng.choice([-1.0, 1.0], size=(k, n_ch))
+    return amplitude * np.repeat(levels, hold, axis=0)[:n]
+
+
+def prbs(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
+         nbits: int = 12) -> NDArray:
+    """Maximum-length binary sequence, +/-amplitude; channels use random circular shifts."""
+    seq = sps.max_len_seq(nbits)[0].astype(float) * 2.0 - 1.0
+    reps = -(-n // seq.size)
+    base = np.tile(seq, reps)
+    shifts = rng.permutation(seq.size)[:n_ch]
+    return amplitude * np.stack([np.roll(base, s)[:n] for s in shifts], axis=1)
+
+
+def multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt: float,
+              band_hz: tuple[float, float] = (5.0, 1000.0), n_lines: int = 200) -> NDArray:
+    """Random-phase multisine with flat amplitude over band_hz, peak scaled to amplitude.
+
+    Frequencies lie on the grid of the record (multiples of 1/(n dt)), so the signal is
+    periodic over the record. Channels have independent phases.
+    """
+    f0 = 1.0 / (n * dt)
+    lo, hi = band_hz
+    if not (0 < lo < hi <= 0.5 / dt):
+        raise BayesAmbError(f"multisine band {band_hz} Hz must satisfy 0 < lo < hi <= "
+                            f"Nyquist {0.5 / dt:g} Hz")
+    k = np.unique(np.round(np.geomspace(max(lo / f0, 1), hi / f0, n_lines)).astype(int))
+    t = np.arange(n) * dt
+    out = np.empty((n, n_ch))
+    for c in range(n_ch):
+        ph = rng.uniform(0, 2 * np.pi, k.size)
+        x = np.cos(2 * np.pi * f0 * np.outer(t, k) + ph).sum(axis=1)
+        out[:, c] = x / np.max(np.abs(x))
+    return amplitude * out
+
+
+def excitation(kind: str, n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
+               dt: float) -> NDArray:
+    """Dispatch on the excitation name (random-binary, prbs, multisine)."""
+    if kind == "random-binary":
+        return random_binary(n, n_ch, amplitude, rng)
+    if kind == "prbs":
+        return prbs(n, n_ch, amplitude, rng)
+    if kind == "multisine":
+        return multisine(n, n_ch, amplitude, rng, dt)
+    raise BayesAmbError(f"option --excitation: unknown value {kind!r}; known: "
+                        f"{', '.join(EXCITATIONS)}")
+
+
+def gaussian_noise(n: int, n_ch: int, rms: float, rng: np.random.Generator, dt: float,
+                   band_hz: float | None = None) -> NDArray:
+    """White (band_hz None) or low-pass band-limited Gaussian noise with the given RMS."""
+    if rms == 0:
+        return np.zeros((n, n_ch))
+    w = rng.standard_normal((n, n_ch))
+    if band_hz is not None:
+        if not 0 < band_hz < 0.5 / dt:
+            raise BayesAmbError(f"disturbance bandwidth {band_hz} Hz must lie below Nyquist "
+                                f"{0.5 / dt:g} Hz")
+        sos = sps.butter(4, band_hz, fs=1.0 / dt, output="sos")
+        w = sps.sosfilt(sos, w, axis=0)
+        w = w / np.sqrt(np.mean(w**2, axis=0, keepdims=True))
+    return rms * w
