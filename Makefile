@@ -26,7 +26,7 @@ demo: $(STAMP)
 	$(VENV)/bin/bayes-amb model
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q
 
 bench: $(STAMP)
 	$(VENV)/bin/bayes-amb bench

@@ -82,6 +82,13 @@ class WhittleLikelihood:
         Y = dft_response(mb, self.X, self.z, xi) / self.scale
         return self.E[None] - Y, mb.stable
 
+    def sum_squares(self, theta: NDArray) -> NDArray:
+        """The paper's eq. 15 cost, sum |eps - S(theta) x|^2 (scaled, via Parseval), (nb,)."""
+        R, stable = self.residual_dft(np.atleast_2d(theta))
+        out = np.sum(np.abs(R) ** 2, axis=(1, 2))
+        out[~stable] = np.inf
+        return out
+
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Per-band log-likelihood (nb, n_bands); -inf rows where G(theta) is not stabilised."""
         theta = np.atleast_2d(theta)

@@ -1,0 +1,211 @@
+"""Log posterior and the MAP point estimate (Nelder-Mead baseline, L-BFGS-B fast path).
+
+The sampled vector is [theta (p), log10 sigma (3)] with sigma = (sigma_noise, sigma_r1,
+sigma_r2). Gradients are central differences computed in one vectorised likelihood call.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize as so
+from numpy.typing import NDArray
+
+from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet
+from bayes_amb.inference.whittle import WhittleLikelihood
+
+_BIG = 1e300
+
+
+class LogPosterior:
+    """Vectorised log posterior: call with P (nb, p + 3); -inf outside the prior or where the
+    controller does not stabilise G(theta). Counts likelihood evaluations (rows)."""
+
+    def __init__(self, likelihood: WhittleLikelihood, priors: PriorSet):
+        self.likelihood = likelihood
+        self.priors = priors
+        self.p = len(priors.names)
+        self.n_evals = 0
+
+    @property
+    def ndim(self) -> int:
+        return self.p + 3
+
+    def __call__(self, P: NDArray) -> NDArray:
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        lp = self.priors.log_prior(P[:, :self.p], P[:, self.p:])
+        ok = np.isfinite(lp)
+        out = np.full(P.shape[0], -np.inf)
+        if np.any(ok):
+            ll = self.likelihood(P[ok, :self.p], P[ok, self.p:])
+            self.n_evals += int(ok.sum())
+            out[ok] = lp[ok] + ll
+        out[~np.isfinite(out)] = -np.inf
+        return out
+
+    def bounds(self) -> list[tuple[float | None, float | None]]:
+        b: list[tuple[float | None, float | None]] = []
+        for pr in self.priors.priors:
+            if pr.kind == "uniform":
+                b.append((pr.a, pr.b))
+            elif pr.kind == "lognormal":
+                b.append((1e-12, None))
+            else:
+                b.append((None, None))
+        b += list(NOISE_LOG10_BOUNDS.values())
+        return b
+
+
+@dataclass(frozen=True)
+class MapResult:
+    """MAP estimate: theta (p,), log10_sigma (3,), log posterior, method, evaluations, time,
+    and the Laplace covariance of [theta, log10 sigma] (None if not computed)."""
+
+    theta: NDArray
+    log10_sigma: NDArray
+    log_post: float
+    method: str
+    n_evals: int
+    wall_s: float
+    success: bool
+    cov: NDArray | None = None
+
+
+def _grad(post: LogPosterior, x: NDArray, h: NDArray) -> tuple[float, NDArray]:
+    d = x.size
+    pts = np.vstack([x, x + np.diag(h), x - np.diag(h)])
+    v = post(pts)
+    f = v[0]
+    g = (v[1:d + 1] - v[d + 1:]) / (2 * h)
+    g[~np.isfinite(g)] = 0.0
+    return f, g
+
+
+def _steps(post: LogPosterior) -> NDArray:
+    return np.concatenate([np.full(post.p, 1e-5), np.full(3, 1e-4)])
+
+
+def laplace_covariance(post: LogPosterior, x: NDArray) -> NDArray | None:
+    """Inverse of the negative Hessian of the log posterior at x (central differences)."""
+    d = x.size
+    h = _steps(post) * 10
+    pts = [x]
+    for i in range(d):
+        for j in range(d):
+            for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
+                e = x.copy()
+                e[i] += si * h[i]
+                e[j] += sj * h[j]
+                pts.append(e)
+    v = post(np.array(pts))
+    if not np.all(np.isfinite(v)):
+        return None
+    H = np.empty((d, d))
+    k = 1
+    for i in range(d):
+        for j in range(d):
+            pp, pm, mp, mm = v[k:k + 4]
+            H[i, j] = (pp - pm - mp + mm) / (4 * h[i] * h[j])
+            k += 4
+    H = 0.5 * (H + H.T)
+    try:
+        cov = np.linalg.inv(-H)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.linalg.eigvalsh(0.5 * (cov + cov.T)) > 0):
+        return None
+    return cov
+
+
+def _theta_start(post: LogPosterior) -> NDArray:
+    return np.array([np.exp(pr.a) if pr.kind == "lognormal" else
+                     float(np.clip(0.0, lo if lo is not None else -np.inf,
+                                   hi if hi is not None else np.inf))
+                     for pr, (lo, hi) in zip(post.priors.priors, post.bounds()[:post.p])])
+
+
+def least_squares_theta(post: LogPosterior, method: str, theta0: NDArray) -> NDArray:
+    """Stage 1: minimise the paper's eq. 15 cost sum |eps - S(theta) x|^2 over theta."""
+    like = post.likelihood
+    bounds = post.bounds()[:post.p]
+
+    def cost(th: NDArray) -> float:
+        v = float(like.sum_squares(th[None])[0])
+        return v if np.isfinite(v) else _BIG
+
+    if method == "nelder-mead":
+        res = so.minimize(cost, theta0, method="Nelder-Mead",
+                          options={"xatol": 1e-9, "fatol": 1e-12, "maxiter": 20000,
+                                   "adaptive": True})
+    else:
+        h = np.full(post.p, 1e-6)
+
+        def fun(th: NDArray) -> tuple[float, NDArray]:
+            pts = np.vstack([th, th + np.diag(h), th - np.diag(h)])
+            v = like.sum_squares(pts)
+            if not np.isfinite(v[0]):
+                return _BIG, np.zeros_like(th)
+            g = (v[1:post.p + 1] - v[post.p + 1:]) / (2 * h)
+            return float(v[0]), np.where(np.isfinite(g), g, 0.0)
+
+        res = so.minimize(fun, theta0, jac=True, method="L-BFGS-B", bounds=bounds,
+                          options={"maxiter": 500, "ftol": 1e-15, "gtol": 1e-10})
+    post.n_evals += res.nfev * (1 if method == "nelder-mead" else 2 * post.p + 1)
+    return np.asarray(res.x, dtype=float)
+
+
+def _initial_point(post: LogPosterior, theta0: NDArray) -> NDArray:
+    """Noise intensities on a coarse grid at theta0 (their MAP follows in the full search)."""
+    grid = np.array([[a, b, c] for a in (-11, -9, -7, -5) for b in (-11, -8)
+                     for c in (-7, -5, -3, -1)], dtype=float)
+    v = post(np.hstack([np.tile(theta0, (grid.shape[0], 1)), grid]))
+    return np.concatenate([theta0, grid[int(np.argmax(v))]])
+
+
+def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = None,
+             refresh_noise: bool = True) -> MapResult:
+    """MAP of the log posterior.
+
+    Stage 1 minimises the paper's eq. 15 cost over theta; stage 2 maximises the full log
+    posterior over theta and the noise intensities from there. method "nelder-mead" is the
+    paper's fminsearch (baseline); "lbfgs" is L-BFGS-B with vectorised central-difference
+    gradients (faster). With refresh_noise the plug-in noise filters are re-evaluated at the
+    first MAP and stage 2 repeated.
+    """
+    t0 = time.perf_counter()
+    n0 = post.n_evals
+    if x0 is None:
+        theta_ls = least_squares_theta(post, method, _theta_start(post))
+        x = _initial_point(post, theta_ls)
+    else:
+        x = np.asarray(x0, dtype=float)
+    bounds = post.bounds()
+    success = True
+    for _round in range(2 if refresh_noise else 1):
+        if method == "nelder-mead":
+            res = so.minimize(lambda v: -post(v[None])[0] if np.isfinite(post(v[None])[0])
+                              else _BIG, x, method="Nelder-Mead",
+                              options={"xatol": 1e-7, "fatol": 1e-6, "maxiter": 20000,
+                                       "maxfev": 20000, "adaptive": True})
+        elif method == "lbfgs":
+            h = _steps(post)
+
+            def fun(v: NDArray) -> tuple[float, NDArray]:
+                f, g = _grad(post, v, h)
+                return (-f, -g) if np.isfinite(f) else (_BIG, np.zeros_like(v))
+
+            res = so.minimize(fun, x, jac=True, method="L-BFGS-B", bounds=bounds,
+                              options={"maxiter": 500, "ftol": 1e-12, "gtol": 1e-6})
+        else:
+            from bayes_amb.errors import BayesAmbError
+            raise BayesAmbError(f"unknown MAP method {method!r}; known: lbfgs, nelder-mead")
+        x = res.x
+        success = bool(res.success) or method == "nelder-mead"
+        if refresh_noise:
+            post.likelihood.set_noise_reference(x[:post.p])
+    lp = float(post(x[None])[0])
+    return MapResult(theta=x[:post.p].copy(), log10_sigma=x[post.p:].copy(), log_post=lp,
+                     method=method, n_evals=post.n_evals - n0,
+                     wall_s=time.perf_counter() - t0, success=success and np.isfinite(lp))

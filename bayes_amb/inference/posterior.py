@@ -1,0 +1,121 @@
+"""ArviZ 1.x DataTree of a posterior, its summary in theta and physical units, and the
+identifiability statement."""
+
+from __future__ import annotations
+
+import os
+import tempfile
+from pathlib import Path
+from typing import Any
+
+import arviz as az
+import numpy as np
+import xarray as xr
+from numpy.typing import NDArray
+
+from bayes_amb.inference.priors import PriorSet
+from bayes_amb.inference.whittle import NOISE_SOURCES, WhittleLikelihood
+from bayes_amb.rig import Rig
+from bayes_amb.uncertainty import get_spec
+
+
+def pointwise_log_likelihood(like: WhittleLikelihood, samples: NDArray, p: int,
+                             batch: int = 256) -> NDArray:
+    """Per-band log-likelihood for every retained draw: (n_walkers, n_draws, n_bands)."""
+    flat = samples.reshape(-1, samples.shape[-1])
+    out = np.empty((flat.shape[0], like.n_bands))
+    for i in range(0, flat.shape[0], batch):
+        out[i:i + batch] = like.pointwise(flat[i:i + batch, :p], flat[i:i + batch, p:])
+    return out.reshape(*samples.shape[:2], like.n_bands)
+
+
+def to_datatree(names: tuple[str, ...], samples: NDArray, log_post: NDArray,
+                log_lik: NDArray, like: WhittleLikelihood, eps: NDArray, x: NDArray,
+                tau: NDArray, attrs: dict[str, Any]) -> xr.DataTree:
+    """Groups posterior, log_likelihood (per frequency band), sample_stats, observed_data and
+    constant_data. Walkers are the chains (they are not independent: see attrs tau)."""
+    p = len(names)
+    post = {n: samples[:, :, j] for j, n in enumerate(names)}
+    post.update({s: 10.0 ** samples[:, :, p + j] for j, s in enumerate(NOISE_SOURCES)})
+    band = {"band": np.arange(like.n_bands)}
+    t = np.arange(eps.shape[0]) * like.forward.dt
+    data = {
+        "posterior": post,
+        "log_likelihood": {"eps": log_lik},
+        "sample_stats": {"lp": log_post},
+        "observed_data": {"eps": eps},
+        "constant_data": {"x": x, "t": t, "band_freq_hz": like.band_freq_hz,
+                          "band_bins": like.counts},
+    }
+    dims = {"eps": ["time", "channel"], "x": ["time", "channel"], "t": ["time"],
+            "band_freq_hz": ["band"], "band_bins": ["band"]}
+    coords = {"channel": ["Ax", "Ay", "Bx", "By"], "time": np.arange(eps.shape[0]), **band}
+    dt = az.from_dict(data, dims=dims, coords=coords)
+    dt["log_likelihood"] = xr.DataTree(xr.Dataset(
+        {"eps": (("chain", "draw", "band"), log_lik)},
+        coords={"chain": np.arange(log_lik.shape[0]), "draw": np.arange(log_lik.shape[1]),
+                "band": np.arange(like.n_bands)}))
+    dt.attrs.update({k: (v if isinstance(v, (str, int, float)) else str(v))
+                     for k, v in attrs.items()})
+    dt.attrs["tau"] = ",".join(f"{v:.3f}" for v in tau)
+    return dt
+
+
+def save_datatree(dt: xr.DataTree, path: str | Path) -> None:
+    """Write NetCDF atomically (temporary file in the same folder, then rename)."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
+    try:
+        dt.to_netcdf(tmp, engine="h5netcdf")
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,
+              truth: dict[str, float] | None = None) -> dict[str, dict[str, Any]]:
+    """Per parameter: mean, sd, hdi90, ess_bulk, ess_tail, r_hat, tau, unit, physical."""
+    s = az.summary(dt, var_names=list(names), ci_prob=0.9, ci_kind="hdi", round_to="none")
+    out: dict[str, dict[str, Any]] = {}
+    for j, n in enumerate(names):
+        row = s.loc[n]
+        spec = get_spec(n)
+        scale = spec.physical_scale(rig)
+        lo, hi = float(row["hdi90_lb"]), float(row["hdi90_ub"])
+        phys = sorted([lo * scale, hi * scale])
+        out[n] = {"mean": float(row["mean"]), "sd": float(row["sd"]), "hdi90": [lo, hi],
+                  "ess_bulk": float(row["ess_bulk"]), "ess_tail": float(row["ess_tail"]),
+                  "r_hat": float(row["r_hat"]), "tau": float(tau[j]), "unit": spec.unit,
+                  "physical": spec.physical_label,
+                  "physical_mean": float(row["mean"]) * scale,
+                  "physical_sd": float(row["sd"]) * abs(scale), "physical_hdi90": phys}
+        if truth is not None and n in truth:
+            out[n]["true"] = truth[n]
+    return out
+
+
+def identifiability(samples: NDArray, names: tuple[str, ...], priors: PriorSet,
+                    corr_limit: float = 0.9, shrink_limit: float = 0.5) -> dict[str, Any]:
+    """Posterior correlations and plain-language warnings where the data do not pin a
+    parameter (posterior sd above shrink_limit times prior sd) or only a combination
+    (|correlation| above corr_limit)."""
+    p = len(names)
+    flat = samples.reshape(-1, samples.shape[-1])[:, :p]
+    corr = np.corrcoef(flat.T) if p > 1 else np.ones((1, 1))
+    notes = []
+    for j, n in enumerate(names):
+        ratio = float(np.std(flat[:, j]) / priors.priors[j].sd)
+        if ratio > shrink_limit:
+            notes.append(f"{n} is not identified by these data: its posterior sd is "
+                         f"{ratio:.0%} of the prior sd, so the estimate mostly restates the "
+                         "prior.")
+    for i in range(p):
+        for j in range(i + 1, p):
+            if abs(corr[i, j]) > corr_limit:
+                notes.append(f"{names[i]} and {names[j]} are strongly correlated "
+                             f"(rho = {corr[i, j]:+.2f}): the data pin a combination of the "
+                             "two, not each one; widen the excitation band or fix one.")
+    return {"correlation": {"names": list(names), "matrix": np.round(corr, 4).tolist()},
+            "identifiable": not notes, "notes": notes}

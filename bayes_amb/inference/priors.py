@@ -1,0 +1,173 @@
+"""Priors on the physical parameters theta and the noise intensities.
+
+Defaults (documented stability-safe ranges; the reference controller is tested to stabilise
+the full plant over |theta| <= 0.5 on each k_* and c_* parameter, and the likelihood is -inf
+wherever it does not):
+
+* k_*, c_*:  uniform(-0.8, 0.8)
+* kxy_*:     uniform(-1.0, 1.0)
+* noise intensities (log-uniform): sigma_noise in [1e-12, 1e-3] m, sigma_r1 in
+  [1e-12, 1e-3] m, sigma_r2 in [1e-8, 10] A.
+
+Syntax, on the command line (``--prior k_By=normal(0.3,0.2)``) or in a TOML file::
+
+    [priors]
+    k_By = "uniform(-0.9, 0.9)"
+    c_By = "normal(0.0, 0.3)"
+    c_Ax = "lognormal(-1.0, 0.5)"   # log(theta) ~ N(mu, sigma), theta > 0
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.errors import ParameterError
+from bayes_amb.uncertainty import get_spec
+
+NOISE_LOG10_BOUNDS = {"sigma_noise": (-12.0, -3.0), "sigma_r1": (-12.0, -3.0),
+                      "sigma_r2": (-8.0, 1.0)}
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A 1-D prior: kind in {uniform, normal, lognormal} with parameters (a, b)."""
+
+    kind: str
+    a: float
+    b: float
+
+    def __post_init__(self) -> None:
+        if self.kind not in ("uniform", "normal", "lognormal"):
+            raise ParameterError(f"unknown prior kind {self.kind!r}; known: uniform, normal, "
+                                 "lognormal")
+        if not (math.isfinite(self.a) and math.isfinite(self.b)):
+            raise ParameterError(f"prior {self}: parameters must be finite")
+        if self.kind == "uniform" and not self.a < self.b:
+            raise ParameterError(f"prior uniform({self.a}, {self.b}): expected lo < hi")
+        if self.kind in ("normal", "lognormal") and not self.b > 0:
+            raise ParameterError(f"prior {self.kind}({self.a}, {self.b}): expected sigma > 0")
+
+    def logpdf(self, x: NDArray) -> NDArray:
+        x = np.asarray(x, dtype=float)
+        if self.kind == "uniform":
+            inside = (x >= self.a) & (x <= self.b)
+            return np.where(inside, -np.log(self.b - self.a), -np.inf)
+        if self.kind == "normal":
+            return -0.5 * ((x - self.a) / self.b) ** 2 - np.log(self.b * np.sqrt(2 * np.pi))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lx = np.log(np.where(x > 0, x, np.nan))
+            out = -0.5 * ((lx - self.a) / self.b) ** 2 - lx - np.log(self.b * np.sqrt(2 * np.pi))
+        return np.where(x > 0, out, -np.inf)
+
+    def sample(self, rng: np.random.Generator, size: int) -> NDArray:
+        if self.kind == "uniform":
+            return rng.uniform(self.a, self.b, size)
+        if self.kind == "normal":
+            return rng.normal(self.a, self.b, size)
+        return np.exp(rng.normal(self.a, self.b, size))
+
+    @property
+    def sd(self) -> float:
+        if self.kind == "uniform":
+            return (self.b - self.a) / math.sqrt(12)
+        if self.kind == "normal":
+            return self.b
+        return math.sqrt((math.exp(self.b**2) - 1) * math.exp(2 * self.a + self.b**2))
+
+    def __str__(self) -> str:
+        return f"{self.kind}({self.a:g}, {self.b:g})"
+
+
+def default_prior(name: str) -> Prior:
+    """Default prior of a parameter name (see module docstring)."""
+    spec = get_spec(name)
+    return Prior("uniform", -1.0, 1.0) if spec.kind == "kxy" else Prior("uniform", -0.8, 0.8)
+
+
+_PRIOR_RE = re.compile(r"^\s*(uniform|normal|lognormal)\s*\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)\s*$")
+
+
+def parse_prior(text: str, name: str = "?") -> Prior:
+    """'uniform(-0.9, 0.9)' -> Prior."""
+    m = _PRIOR_RE.match(text)
+    if not m:
+        raise ParameterError(f"prior for {name}: cannot parse {text!r}; expected e.g. "
+                             "uniform(-0.9,0.9), normal(0,0.3) or lognormal(-1,0.5)")
+    try:
+        a, b = float(m.group(2)), float(m.group(3))
+    except ValueError:
+        raise ParameterError(f"prior for {name}: non-numeric value in {text!r}") from None
+    return Prior(m.group(1), a, b)
+
+
+def parse_prior_assignment(text: str) -> tuple[str, Prior]:
+    """'k_By=uniform(-0.9,0.9)' -> ('k_By', Prior)."""
+    name, eq, rest = text.partition("=")
+    if not eq:
+        raise ParameterError(f"option --prior: expected NAME=kind(a,b), got {text!r}")
+    name = name.strip()
+    get_spec(name)
+    return name, parse_prior(rest, name)
+
+
+def load_prior_file(path: str | Path) -> dict[str, Prior]:
+    """Priors from a TOML file with a [priors] table of NAME = "kind(a, b)"."""
+    p = Path(path)
+    if not p.is_file():
+        raise ParameterError(f"prior file {p}: field <file>: not found")
+    try:
+        data = tomllib.loads(p.read_text(encoding="utf-8"))
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ParameterError(f"prior file {p}: field <toml>: not valid TOML ({exc})") from None
+    table = data.get("priors")
+    if not isinstance(table, dict):
+        raise ParameterError(f"prior file {p}: field priors: missing or not a table")
+    out = {}
+    for name, text in table.items():
+        if not isinstance(text, str):
+            raise ParameterError(f"prior file {p}: field priors.{name}: expected a string, "
+                                 f"got {text!r}")
+        get_spec(name)
+        out[name] = parse_prior(text, name)
+    return out
+
+
+@dataclass(frozen=True)
+class PriorSet:
+    """Priors of theta (in parameter order) and the log-uniform noise intensities."""
+
+    names: tuple[str, ...]
+    priors: tuple[Prior, ...]
+
+    @classmethod
+    def build(cls, names: tuple[str, ...], overrides: dict[str, Prior] | None = None
+              ) -> PriorSet:
+        overrides = dict(overrides or {})
+        extra = sorted(set(overrides) - set(names))
+        if extra:
+            raise ParameterError(f"prior given for {extra[0]!r}, which is not among the "
+                                 f"estimated parameters {list(names)}")
+        return cls(names, tuple(overrides.get(n, default_prior(n)) for n in names))
+
+    def log_prior(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
+        """Joint log prior for a batch: theta (nb, p), log10_sigma (nb, 3)."""
+        lp = np.zeros(theta.shape[0])
+        for j, pr in enumerate(self.priors):
+            lp = lp + pr.logpdf(theta[:, j])
+        for j, (lo, hi) in enumerate(NOISE_LOG10_BOUNDS.values()):
+            inside = (log10_sigma[:, j] >= lo) & (log10_sigma[:, j] <= hi)
+            lp = np.where(inside, lp - np.log(hi - lo), -np.inf)
+        return lp
+
+    def to_dict(self) -> dict[str, str]:
+        d = {n: str(p) for n, p in zip(self.names, self.priors)}
+        d.update({k: f"log10-uniform({lo:g}, {hi:g})" for k, (lo, hi) in
+                  NOISE_LOG10_BOUNDS.items()})
+        return d

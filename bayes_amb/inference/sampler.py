@@ -1,0 +1,105 @@
+"""emcee ensemble sampling of the log posterior, run until 50 autocorrelation times.
+
+Walkers start in a small ball around the MAP (scaled by the Laplace covariance when it is
+available). Sampling proceeds in chunks; after each chunk the integrated autocorrelation
+time tau is estimated (emcee.autocorr, tol=0) and sampling stops once the chain is at least
+50 tau long and tau has settled (relative change < 5 %), or at max_steps. Then 2 tau_max
+steps are discarded as burn-in and the chain is thinned by tau_min / 2.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import emcee
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.inference.estimate import LogPosterior
+
+log = logging.getLogger(__name__)
+
+
+@dataclass(frozen=True)
+class SamplerRun:
+    """Retained samples (n_walkers, n_draws, ndim), their log posterior (n_walkers, n_draws),
+    tau per dimension, steps run, burn-in, thinning, acceptance fraction and wall time."""
+
+    samples: NDArray
+    log_post: NDArray
+    tau: NDArray
+    n_steps: int
+    burn: int
+    thin: int
+    acceptance: NDArray
+    wall_s: float
+    n_tau: float
+
+
+def initial_ball(post: LogPosterior, center: NDArray, cov: NDArray | None, n_walkers: int,
+                 rng: np.random.Generator, scale: float = 0.1) -> NDArray:
+    """Walker starting points around center with finite log posterior."""
+    d = center.size
+    if cov is not None:
+        chol = np.linalg.cholesky(cov * scale**2 + 1e-18 * np.eye(d))
+    else:
+        widths = np.concatenate([np.full(post.p, 1e-4), np.full(3, 1e-3)])
+        chol = np.diag(widths)
+    out = np.empty((n_walkers, d))
+    filled = 0
+    for _ in range(100):
+        cand = center + rng.standard_normal((n_walkers, d)) @ chol.T
+        ok = cand[np.isfinite(post(cand))]
+        take = min(ok.shape[0], n_walkers - filled)
+        out[filled:filled + take] = ok[:take]
+        filled += take
+        if filled == n_walkers:
+            return out
+        chol = chol * 0.5
+    raise RuntimeError("could not place walkers with finite posterior around the MAP")
+
+
+def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
+              n_steps: int | None = None, max_steps: int = 20000, chunk: int = 250,
+              n_tau: float = 50.0,
+              progress: Callable[[int, int, float], None] | None = None) -> SamplerRun:
+    """Run emcee (vectorised over walkers). n_steps fixed, or None for the automatic rule."""
+    n_walkers, d = start.shape
+    seed = int(rng.integers(2**31 - 1))
+    sampler = emcee.EnsembleSampler(n_walkers, d, post, vectorize=True,
+                                    moves=[(emcee.moves.DEMove(), 0.8),
+                                           (emcee.moves.DESnookerMove(), 0.2)])
+    sampler.random_state = np.random.RandomState(seed).get_state()
+    t0 = time.perf_counter()
+    state = start
+    total = 0
+    tau_prev = None
+    tau = np.full(d, np.nan)
+    target = n_steps if n_steps is not None else max_steps
+    while total < target:
+        step = min(chunk, target - total)
+        state = sampler.run_mcmc(state, step, progress=False)
+        total += step
+        chain = sampler.get_chain()
+        tau = emcee.autocorr.integrated_time(chain, tol=0)
+        tau_max = float(np.max(tau[:post.p])) if post.p else float(np.max(tau))
+        if progress is not None:
+            progress(total, target, tau_max)
+        if n_steps is None and tau_prev is not None:
+            settled = np.all(np.abs(tau - tau_prev) / tau < 0.05)
+            if total >= n_tau * tau_max and settled:
+                break
+        tau_prev = tau
+    tau_max = float(np.max(tau[:post.p])) if post.p else float(np.max(tau))
+    burn = min(int(math.ceil(2 * tau_max)), total // 2)
+    thin = max(1, int(np.min(tau[:post.p]) / 2)) if post.p else 1
+    samples = np.swapaxes(sampler.get_chain(discard=burn, thin=thin), 0, 1)
+    lp = np.swapaxes(sampler.get_log_prob(discard=burn, thin=thin), 0, 1)
+    log.info("emcee: %d steps, tau_max %.1f, burn %d, thin %d", total, tau_max, burn, thin)
+    return SamplerRun(samples=samples, log_post=lp, tau=tau, n_steps=total, burn=burn,
+                      thin=thin, acceptance=sampler.acceptance_fraction,
+                      wall_s=time.perf_counter() - t0, n_tau=total / tau_max)
