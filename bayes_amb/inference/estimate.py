@@ -88,16 +88,33 @@ def _steps(post: LogPosterior) -> NDArray:
 
 
 def laplace_covariance(post: LogPosterior, x: NDArray) -> NDArray | None:
-    """Inverse of the negative Hessian of the log posterior at x (central differences)."""
-    d = x.size
-    h = _steps(post) * 10
+    """Inverse of the negative Hessian of the log posterior at x (central differences).
+
+    If the full Hessian is not usable (a noise intensity at its prior bound, as for
+    noise-free data), the theta block conditional on the noise intensities is returned
+    inside an otherwise diagonal covariance (1e-6 on log10 sigma).
+    """
+    cov = _hessian_cov(post, x, np.arange(x.size))
+    if cov is not None:
+        return cov
+    sub = _hessian_cov(post, x, np.arange(post.p))
+    if sub is None:
+        return None
+    full = np.diag(np.full(x.size, 1e-6))
+    full[:post.p, :post.p] = sub
+    return full
+
+
+def _hessian_cov(post: LogPosterior, x: NDArray, idx: NDArray) -> NDArray | None:
+    d = idx.size
+    h = (_steps(post) * 10)[idx]
     pts = [x]
     for i in range(d):
         for j in range(d):
             for si, sj in ((1, 1), (1, -1), (-1, 1), (-1, -1)):
                 e = x.copy()
-                e[i] += si * h[i]
-                e[j] += sj * h[j]
+                e[idx[i]] += si * h[i]
+                e[idx[j]] += sj * h[j]
                 pts.append(e)
     v = post(np.array(pts))
     if not np.all(np.isfinite(v)):

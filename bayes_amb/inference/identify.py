@@ -45,7 +45,7 @@ NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 throu
 
 @dataclass
 class IdentifyOptions:
-    """walkers (None: max(32, 4 ndim)), steps (None: run to 50 tau), map_only, map_method
+    """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only, map_method
     (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max)."""
 
     walkers: int | None = None
@@ -147,7 +147,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         return result
     rng = np.random.default_rng(opt.seed)
     ndim = post.ndim
-    n_walkers = opt.walkers or max(32, 4 * ndim)
+    n_walkers = opt.walkers or max(24, 2 * ndim + 2)
     n_walkers += n_walkers % 2
     if n_walkers < 2 * ndim:
         raise BayesAmbError(f"option --walkers: {n_walkers} is fewer than 2 x {ndim} dimensions")

@@ -3,8 +3,10 @@
 Walkers start in a small ball around the MAP (scaled by the Laplace covariance when it is
 available). Sampling proceeds in chunks; after each chunk the integrated autocorrelation
 time tau is estimated (emcee.autocorr, tol=0) and sampling stops once the chain is at least
-50 tau long and tau has settled (relative change < 5 %), or at max_steps. Then 2 tau_max
-steps are discarded as burn-in and the chain is thinned by tau_min / 2.
+50 tau long, tau has settled (relative change < 5 %) and every parameter of interest has
+rank-normalised split R-hat <= 1.01 and bulk ESS >= 400 (walkers taken as chains), or at
+max_steps. Then 2 tau_max steps are discarded as burn-in and the chain is thinned by
+tau_min / 2.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
+import arviz as az
 import emcee
 import numpy as np
 from numpy.typing import NDArray
@@ -63,6 +66,25 @@ def initial_ball(post: LogPosterior, center: NDArray, cov: NDArray | None, n_wal
     raise RuntimeError("could not place walkers with finite posterior around the MAP")
 
 
+def _retained(sampler: emcee.EnsembleSampler, tau: NDArray, p: int) -> NDArray:
+    tau_max = float(np.max(tau[:p])) if p else float(np.max(tau))
+    total = sampler.iteration
+    burn = min(int(math.ceil(2 * tau_max)), total // 2)
+    thin = max(1, int(np.min(tau[:p]) / 2)) if p else 1
+    return np.swapaxes(sampler.get_chain(discard=burn, thin=thin), 0, 1)
+
+
+def _diagnostics_ok(sampler: emcee.EnsembleSampler, tau: NDArray, p: int,
+                    r_hat_max: float = 1.01, ess_min: float = 400.0) -> bool:
+    """R-hat and bulk ESS of the retained draws of the first p dimensions."""
+    draws = _retained(sampler, tau, p)
+    for j in range(p):
+        x = draws[:, :, j]
+        if not (float(az.rhat(x)) <= r_hat_max and float(az.ess(x)) >= ess_min):
+            return False
+    return True
+
+
 def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
               n_steps: int | None = None, max_steps: int = 20000, chunk: int = 250,
               n_tau: float = 50.0,
@@ -91,7 +113,7 @@ def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
             progress(total, target, tau_max)
         if n_steps is None and tau_prev is not None:
             settled = np.all(np.abs(tau - tau_prev) / tau < 0.05)
-            if total >= n_tau * tau_max and settled:
+            if total >= n_tau * tau_max and settled and _diagnostics_ok(sampler, tau, post.p):
                 break
         tau_prev = tau
     tau_max = float(np.max(tau[:post.p])) if post.p else float(np.max(tau))

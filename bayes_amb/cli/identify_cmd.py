@@ -1,0 +1,100 @@
+"""`bayes-amb identify`: MAP and emcee posterior of named parameters from a recording."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.inference.priors import load_prior_file, parse_prior_assignment
+from bayes_amb.io.recording import load_recording
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("identify", help="identify parameters from a recording",
+                       description="Fit S(theta) to a closed-loop recording: MAP, then an "
+                       "emcee posterior run to 50 autocorrelation times. Writes "
+                       "RUN_DIR/posterior.nc and RUN_DIR/summary.json.")
+    p.add_argument("recording", metavar="NAME.csv")
+    p.add_argument("--params", required=True, help="comma-separated names, e.g. k_By,c_By")
+    p.add_argument("--prior", action="append", default=[], metavar="NAME=kind(a,b)",
+                   help="prior, e.g. k_By=uniform(-0.9,0.9) (repeatable)")
+    p.add_argument("--prior-file", default=None, help="TOML file with a [priors] table")
+    p.add_argument("--walkers", type=int, default=None)
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--steps", type=int, default=None, help="fixed number of steps")
+    g.add_argument("--auto", action="store_true", help="run to 50 tau (the default)")
+    p.add_argument("--map-only", action="store_true", help="MAP + Laplace only (fast)")
+    p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, metavar="RUN_DIR")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    p.set_defaults(func=run)
+
+
+def _progress_bar(enabled: bool):
+    if not enabled:
+        return None, None
+    from tqdm import tqdm
+
+    bar = tqdm(total=None, unit="step", file=sys.stderr, desc="sampling", leave=False)
+
+    def update(done: int, target: int, tau_max: float) -> None:
+        bar.total = target
+        bar.set_postfix_str(f"tau_max {tau_max:.0f}, {done / max(tau_max, 1):.0f} tau",
+                            refresh=False)
+        bar.update(done - bar.n)
+
+    return update, bar
+
+
+def format_summary(s: dict) -> str:
+    lines = [f"Identification of {s['recording']} ({s['inference']}, "
+             f"{'converged' if s['converged'] else 'NOT converged'}, {s['wall_s']:.1f} s)",
+             f"{'param':<7} {'MAP':>9} {'mean':>9} {'sd':>9} {'90% HDI':>21} "
+             f"{'physical mean':>16} {'R-hat':>6} {'ESS':>6} {'tau':>6}"]
+    for n, v in s["parameters"].items():
+        lo, hi = v["hdi90"]
+        rh = f"{v['r_hat']:.3f}" if v["r_hat"] is not None else "-"
+        ess = f"{v['ess_bulk']:.0f}" if v["ess_bulk"] is not None else "-"
+        tau = f"{v['tau']:.1f}" if v["tau"] is not None else "-"
+        lines.append(f"{n:<7} {s['map'][n]:>9.4f} {v['mean']:>9.4f} {v['sd']:>9.3g} "
+                     f"[{lo:>8.4f}, {hi:>8.4f}] {v['physical_mean']:>11.4g} {v['unit']:<4} "
+                     f"{rh:>6} {ess:>6} {tau:>6}")
+    noise = s["noise"]["map"]
+    lines.append("noise (MAP): " + ", ".join(f"{k} {v['value']:.3g} {v['unit']}"
+                                              for k, v in noise.items()))
+    for note in s.get("identifiability", {}).get("notes", []):
+        lines.append(f"warning: {note}")
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    rec = load_recording(args.recording)
+    priors = {}
+    if args.prior_file:
+        priors.update(load_prior_file(args.prior_file))
+    for text in args.prior:
+        name, pr = parse_prior_assignment(text)
+        priors[name] = pr
+    if args.walkers is not None and args.walkers < 4:
+        raise BayesAmbError(f"option --walkers: value {args.walkers} too small")
+    if args.steps is not None and args.steps < 10:
+        raise BayesAmbError(f"option --steps: value {args.steps} too small (>= 10)")
+    update, bar = _progress_bar(not (args.no_progress or args.json or args.map_only))
+    try:
+        result = identify(rec, args.params, priors, IdentifyOptions(
+            walkers=args.walkers, steps=args.steps, map_only=args.map_only,
+            map_method=args.map_method, seed=args.seed, progress=update))
+    finally:
+        if bar is not None:
+            bar.close()
+    result.save(args.out)
+    summary = to_jsonable(result.summary)
+    text = format_summary(summary) + f"\nwrote {args.out}/summary.json" + \
+        ("" if args.map_only else f" and {args.out}/posterior.nc")
+    emit(summary, text, args.json)
+    return 0
