@@ -46,7 +46,9 @@ NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 throu
 @dataclass
 class IdentifyOptions:
     """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only, map_method
-    (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max)."""
+    (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max),
+    noise_model ("loop": the coloured loop noise model; "iid": white Gaussian eps, the naive
+    model, kept to show that it is overconfident)."""
 
     walkers: int | None = None
     steps: int | None = None
@@ -55,6 +57,7 @@ class IdentifyOptions:
     seed: int = 0
     max_steps: int = 20000
     progress: Callable[[int, int, float], None] | None = None
+    noise_model: str = "loop"
 
 
 @dataclass
@@ -112,7 +115,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     prior_set = PriorSet.build(names, priors)
     forward = ForwardModel(recording, names)
     eps = dual_youla_eps(forward.parts, np.asarray(recording.y), np.asarray(recording.u))
-    like = WhittleLikelihood(forward, eps)
+    like = WhittleLikelihood(forward, eps, noise_model=opt.noise_model)
     post = LogPosterior(like, prior_set)
     m = find_map(post, opt.map_method)
     if not np.isfinite(m.log_post):

@@ -83,7 +83,11 @@ class WhittleLikelihood:
     """
 
     def __init__(self, forward: ForwardModel, eps: NDArray, n_bands: int = 256,
-                 f_max_hz: float | str | None = "auto"):
+                 f_max_hz: float | str | None = "auto", noise_model: str = "loop"):
+        if noise_model not in ("loop", "iid"):
+            from bayes_amb.errors import BayesAmbError
+            raise BayesAmbError(f"unknown noise model {noise_model!r}; known: loop, iid")
+        self.noise_model = noise_model
         self.forward = forward
         n = eps.shape[0]
         self.n = n
@@ -108,7 +112,15 @@ class WhittleLikelihood:
         return self.starts.size
 
     def set_noise_reference(self, theta_ref: NDArray) -> None:
-        """Evaluate the noise filters at theta_ref (plug-in) and band-average Phi per source."""
+        """Evaluate the noise filters at theta_ref (plug-in) and band-average Phi per source.
+
+        With noise_model "iid" (the naive model, for comparison only) Phi = sigma_noise^2 I.
+        """
+        if self.noise_model == "iid":
+            eye = np.broadcast_to(np.eye(4) / self.scale**2, (self.n_bands, 4, 4))
+            self.phi_sources = np.stack([eye, 0 * eye, 0 * eye]).astype(complex)
+            self.theta_ref = np.array(theta_ref, dtype=float)
+            return
         A, B, C, D = self.forward.noise_system(np.asarray(theta_ref, dtype=float))
         H = ss_freqresp(A, B, C, D, self.z) / self.scale            # (nf, 4, 12)
         phi = []
