@@ -40,7 +40,8 @@ def _add_optional_commands(sub: argparse._SubParsersAction) -> None:
     """Commands of later pipeline stages register here when their modules exist."""
     import importlib
 
-    for name in ("controller_cmd", "simulate_cmd", "identify_cmd", "bench_cmd"):
+    for name in ("controller_cmd", "simulate_cmd", "identify_cmd", "study_cmd", "bench_cmd",
+                 "diagnose_cmd", "report_cmd", "demo_cmd"):
         try:
             mod = importlib.import_module(f"bayes_amb.cli.{name}")
         except ModuleNotFoundError as exc:

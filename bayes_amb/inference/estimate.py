@@ -222,6 +222,7 @@ def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = Non
         success = bool(res.success) or method == "nelder-mead"
         if refresh_noise:
             post.likelihood.set_noise_reference(x[:post.p])
+            post.likelihood.set_prewhitening(x[post.p:])
     lp = float(post(x[None])[0])
     return MapResult(theta=x[:post.p].copy(), log10_sigma=x[post.p:].copy(), log_post=lp,
                      method=method, n_evals=post.n_evals - n0,

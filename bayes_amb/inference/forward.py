@@ -135,9 +135,11 @@ class ForwardModel:
         A_cl, B_cl, C_cl, D_cl = loop_matrices(self.parts, Ap, Bp, self.plant.C)
         return A_cl[0], B_cl[0][:, 4:], C_cl[0], D_cl[:, 4:]
 
-    def modal(self, theta: NDArray) -> tuple[ModalBatch, NDArray | None]:
-        """Modal form of x -> eps for a batch, and the modal state after the record."""
-        return diagonalise(*self.excitation_system(theta), self.x)
+    def modal(self, theta: NDArray, x: NDArray | None = None
+              ) -> tuple[ModalBatch, NDArray | None]:
+        """Modal form of x -> eps for a batch, and the modal state after the record x
+        (default: the recording's excitation)."""
+        return diagonalise(*self.excitation_system(theta), self.x if x is None else x)
 
     # ------------------------------------------------------------- predictions
     def simulate(self, theta: NDArray) -> NDArray:

@@ -17,6 +17,14 @@ into bands over which Phi is nearly constant, which makes each evaluation cheap:
 
 The per-band terms are the pointwise log-likelihood used for PSIS-LOO.
 
+Prewhitening: the residual spectrum of an AMB loop spans six decades (the innovation
+filter Mt is high-pass), and the rectangular-window leakage of a raw DFT would then swamp
+the low-frequency bins, biasing the Whittle likelihood. Once a reference (theta, sigma) is
+known (the first MAP), eps and x are both filtered with the same scalar minimum-phase FIR
+w(z) with |w|^2 ~ 1 / (mean diagonal of Phi). A scalar filter commutes with S(theta), so
+w*eps - S(theta)(w*x) = w*(noise) exactly (everything from rest), and its spectrum
+|w|^2 Phi is nearly flat: leakage becomes negligible.
+
 Band limit: only bins up to f_max_hz enter. By default that is the validity band of the
 nominal model, half the frequency of the lowest mode the reduction left out (514 Hz for the
 8-state model of the reference rig at 31500 rpm: the band in which the reduced model's
@@ -31,12 +39,29 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.signal import lfilter
 
 from bayes_amb.control.discrete import ss_freqresp
 from bayes_amb.inference.forward import ForwardModel, dft_response
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
 NOISE_UNITS = ("m", "m", "A")
+
+
+def minimum_phase_inverse(power: NDArray, n_taps: int) -> NDArray:
+    """FIR taps of the minimum-phase filter w with |w|^2 = 1/power (power on a uniform grid
+    of n_fft/2 + 1 points over [0, pi]), by the real cepstrum; truncated with a half-Hann
+    taper and scaled to unit RMS gain."""
+    n_fft = 2 * (power.size - 1)
+    log_mag = -0.5 * np.log(np.maximum(power, 1e-300 + 1e-12 * power.max()))
+    c = np.fft.irfft(log_mag, n_fft)                       # real cepstrum of log|w|
+    fold = np.zeros(n_fft)
+    fold[0] = c[0]
+    fold[1:n_fft // 2] = 2 * c[1:n_fft // 2]
+    fold[n_fft // 2] = c[n_fft // 2]
+    w = np.fft.irfft(np.exp(np.fft.rfft(fold)), n_fft)[:n_taps]
+    w = w * np.cos(0.5 * np.pi * np.arange(n_taps) / n_taps) ** 2
+    return w / np.sqrt(np.mean(np.abs(np.fft.rfft(w, n_fft)) ** 2))
 
 
 def band_edges(n_bins: int, n_bands: int = 256) -> NDArray:
@@ -99,13 +124,38 @@ class WhittleLikelihood:
         self.f_max_hz = float(k[-1] / (n * forward.dt))
         self.k = k
         self.z = np.exp(2j * np.pi * k / n)
+        self.eps = np.asarray(eps, dtype=float)
         self.scale = float(np.sqrt(np.mean(eps**2))) or 1.0
-        self.E = np.fft.rfft(eps / self.scale, axis=0)[k]
-        self.X = np.fft.rfft(forward.x, axis=0)[k]
         self.starts = band_edges(k.size, n_bands)
         self.counts = np.diff(np.append(self.starts, k.size))
         self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (n * forward.dt)
+        self.prefilter = np.ones(1)
+        self._apply_prefilter()
         self.set_noise_reference(np.zeros(len(forward.params)))
+
+    def _apply_prefilter(self) -> None:
+        """Filter eps and x with the scalar FIR self.prefilter (from rest); DFT both."""
+        w = self.prefilter
+        self.x_w = lfilter(w, [1.0], self.forward.x, axis=0)
+        eps_w = lfilter(w, [1.0], self.eps, axis=0)
+        self.E = np.fft.rfft(eps_w / self.scale, axis=0)[self.k]
+        self.X = np.fft.rfft(self.x_w, axis=0)[self.k]
+        self.w_gain2 = np.abs(np.polyval(w[::-1], 1.0 / self.z)) ** 2     # |w(z_k)|^2
+
+    def set_prewhitening(self, log10_sigma: NDArray, n_taps: int = 128) -> None:
+        """Design the prewhitening FIR from the current noise reference and intensities."""
+        if self.noise_model == "iid":
+            return
+        sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
+        n_fft = 4096
+        zz = np.exp(2j * np.pi * np.arange(n_fft // 2 + 1) / n_fft)
+        A, B, C, D = self.forward.noise_system(self.theta_ref)
+        H = ss_freqresp(A, B, C, D, zz)
+        power = sum(s2 * np.sum(np.abs(H[:, :, 4 * j:4 * (j + 1)]) ** 2, axis=(1, 2))
+                    for j, s2 in enumerate(sig2)) / 4
+        self.prefilter = minimum_phase_inverse(power, n_taps)
+        self._apply_prefilter()
+        self.set_noise_reference(self.theta_ref)
 
     @property
     def n_bands(self) -> int:
@@ -126,14 +176,14 @@ class WhittleLikelihood:
         phi = []
         for s in range(3):
             Hs = H[:, :, 4 * s:4 * (s + 1)]
-            P = Hs @ np.conj(np.swapaxes(Hs, 1, 2))
+            P = Hs @ np.conj(np.swapaxes(Hs, 1, 2)) * self.w_gain2[:, None, None]
             phi.append(np.add.reduceat(P, self.starts, axis=0) / self.counts[:, None, None])
         self.phi_sources = np.stack(phi)                            # (3, nbands, 4, 4)
         self.theta_ref = np.array(theta_ref, dtype=float)
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of eps - S(theta) x (scaled) for a batch, and the stability mask."""
-        mb, xi = self.forward.modal(theta)
+        mb, xi = self.forward.modal(theta, self.x_w)
         Y = dft_response(mb, self.X, self.z, xi) / self.scale
         return self.E[None] - Y, mb.stable
 

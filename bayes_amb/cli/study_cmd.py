@@ -1,0 +1,50 @@
+"""`bayes-amb study`: run a study file (grid of simulated experiments)."""
+
+from __future__ import annotations
+
+import argparse
+
+from bayes_amb.cli.common import emit
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.studies import finalise, load_study, run_study
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("study", help="run a sensitivity or calibration study",
+                       description="Run the replicates of a study TOML file (see studies/), "
+                       "resumably, on a process pool or Dask; write DIR/results.csv, "
+                       "DIR/summary.csv, DIR/results.nc, DIR/figures/ and DIR/study.json.")
+    p.add_argument("study", metavar="studies/NAME.toml")
+    p.add_argument("--out", required=True, metavar="DIR")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--workers", type=int, default=2, help="local processes (default 2)")
+    g.add_argument("--dask-local", type=int, default=None, metavar="N",
+                   help="run on a local Dask cluster of N workers")
+    g.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="run on the Dask scheduler at ADDR")
+    p.add_argument("--resume", action="store_true",
+                   help="continue a study in DIR (finished replicates are always skipped)")
+    p.add_argument("--no-figures", action="store_true")
+    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    spec = load_study(args.study)
+    if args.workers is not None and args.workers < 1:
+        raise BayesAmbError(f"option --workers: value {args.workers} must be >= 1")
+    rows = run_study(spec, args.out, workers=args.workers, dask_local=args.dask_local,
+                     scheduler=args.scheduler, progress=not (args.no_progress or args.json))
+    manifest = finalise(spec, rows, args.out)
+    if not args.no_figures:
+        from bayes_amb.plots.studies import study_figures
+        manifest["figures"] = [str(p) for p in study_figures(spec, args.out)]
+    d = {"study": spec.name, "out": args.out, "rows": len(rows),
+         "failures": manifest["failures"], "conclusions": manifest["conclusions"],
+         "sbc": manifest["sbc"], "figures": manifest.get("figures", [])}
+    text = [f"study '{spec.name}': {len(rows)} replicates ({manifest['failures']} failed), "
+            f"results in {args.out}/"]
+    text += [f"  - {c}" for c in manifest["conclusions"]]
+    emit(d, "\n".join(text), args.json)
+    return 0
