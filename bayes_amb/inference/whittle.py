@@ -19,11 +19,13 @@ The per-band terms are the pointwise log-likelihood used for PSIS-LOO.
 
 Prewhitening: the residual spectrum of an AMB loop spans six decades (the innovation
 filter Mt is high-pass), and the rectangular-window leakage of a raw DFT would then swamp
-the low-frequency bins, biasing the Whittle likelihood. Once a reference (theta, sigma) is
-known (the first MAP), eps and x are both filtered with the same scalar minimum-phase FIR
-w(z) with |w|^2 ~ 1 / (mean diagonal of Phi). A scalar filter commutes with S(theta), so
-w*eps - S(theta)(w*x) = w*(noise) exactly (everything from rest), and its spectrum
-|w|^2 Phi is nearly flat: leakage becomes negligible.
+the low-frequency bins, biasing the Whittle likelihood. eps and x are therefore both filtered
+with the same scalar minimum-phase FIR w(z), |w|^2 ~ 1 / (Welch spectrum of eps averaged
+over channels), designed once from the data. A scalar filter commutes with S(theta), so
+w*eps - S(theta)(w*x) = w*(noise) exactly (everything from rest), and its spectrum |w|^2 Phi
+is nearly flat: leakage becomes negligible. The filtering is a fixed invertible transform of
+the data (lower-triangular Toeplitz, diagonal w_0), so log p(eps) = log p(w*eps) +
+4 N log|w_0|, which is added: likelihoods stay comparable across models.
 
 Band limit: only bins up to f_max_hz enter. By default that is the validity band of the
 nominal model, half the frequency of the lowest mode the reduction left out (514 Hz for the
@@ -39,7 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
+from scipy.signal import lfilter, welch
 
 from bayes_amb.control.discrete import ss_freqresp
 from bayes_amb.inference.forward import ForwardModel, dft_response
@@ -62,6 +64,17 @@ def minimum_phase_inverse(power: NDArray, n_taps: int) -> NDArray:
     w = np.fft.irfft(np.exp(np.fft.rfft(fold)), n_fft)[:n_taps]
     w = w * np.cos(0.5 * np.pi * np.arange(n_taps) / n_taps) ** 2
     return w / np.sqrt(np.mean(np.abs(np.fft.rfft(w, n_fft)) ** 2))
+
+
+def data_prewhitening(eps: NDArray, dt: float, n_taps: int = 128) -> NDArray:
+    """Prewhitening FIR from the data: |w|^2 ~ 1 / (Welch PSD of eps, mean over channels)."""
+    n = eps.shape[0]
+    nper = int(min(512, max(32, 2 ** int(np.log2(max(n // 8, 32))))))
+    _, pxx = welch(eps, fs=1.0 / dt, nperseg=nper, axis=0)
+    power = np.mean(pxx, axis=1)
+    grid = np.linspace(0, 1, 2049)
+    power = np.interp(grid, np.linspace(0, 1, power.size), power)
+    return minimum_phase_inverse(power, n_taps)
 
 
 def band_edges(n_bins: int, n_bands: int = 256) -> NDArray:
@@ -130,6 +143,8 @@ class WhittleLikelihood:
         self.counts = np.diff(np.append(self.starts, k.size))
         self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (n * forward.dt)
         self.prefilter = np.ones(1)
+        if noise_model == "loop":
+            self.prefilter = data_prewhitening(self.eps, forward.dt)
         self._apply_prefilter()
         self.set_noise_reference(np.zeros(len(forward.params)))
 
@@ -142,20 +157,10 @@ class WhittleLikelihood:
         self.X = np.fft.rfft(self.x_w, axis=0)[self.k]
         self.w_gain2 = np.abs(np.polyval(w[::-1], 1.0 / self.z)) ** 2     # |w(z_k)|^2
 
-    def set_prewhitening(self, log10_sigma: NDArray, n_taps: int = 128) -> None:
-        """Design the prewhitening FIR from the current noise reference and intensities."""
-        if self.noise_model == "iid":
-            return
-        sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
-        n_fft = 4096
-        zz = np.exp(2j * np.pi * np.arange(n_fft // 2 + 1) / n_fft)
-        A, B, C, D = self.forward.noise_system(self.theta_ref)
-        H = ss_freqresp(A, B, C, D, zz)
-        power = sum(s2 * np.sum(np.abs(H[:, :, 4 * j:4 * (j + 1)]) ** 2, axis=(1, 2))
-                    for j, s2 in enumerate(sig2)) / 4
-        self.prefilter = minimum_phase_inverse(power, n_taps)
-        self._apply_prefilter()
-        self.set_noise_reference(self.theta_ref)
+    @property
+    def jacobian(self) -> float:
+        """log |d(w*eps)/d eps| = 4 N log|w_0| (added to the log-likelihood)."""
+        return 4 * self.n * float(np.log(abs(self.prefilter[0])))
 
     @property
     def n_bands(self) -> int:
@@ -223,4 +228,4 @@ class WhittleLikelihood:
     def __call__(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Total log-likelihood (nb,), including the Jacobian of the eps scaling."""
         ll = self.pointwise(theta, log10_sigma).sum(axis=1)
-        return ll - 2 * 4 * self.k.size * np.log(self.scale)
+        return ll - 2 * 4 * self.k.size * np.log(self.scale) + self.jacobian

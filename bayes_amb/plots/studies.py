@@ -1,0 +1,122 @@
+"""Study figures: bias and 90 % interval width against each factor with coverage, and SBC
+rank histograms. Built from the study's summary and results files only."""
+
+from __future__ import annotations
+
+import csv
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from matplotlib.figure import Figure
+
+from bayes_amb.plots.style import save_figure, style_context, styled
+from bayes_amb.studies.spec import StudySpec
+from bayes_amb.studies.summary import binomial_band
+
+
+def _read_csv(path: Path) -> list[dict[str, str]]:
+    with path.open(newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def _num(v: str) -> float:
+    try:
+        return float(v)
+    except (TypeError, ValueError):
+        return float("nan")
+
+
+@styled
+def plot_factor(summary: list[dict[str, str]], factor: str, param: str) -> Figure:
+    """Bias (+- RMSE) and mean 90 % interval width of one parameter against one factor,
+    averaged over the other factors; coverage with its 95 % interval on the right axis."""
+    fig = Figure(figsize=(6.4, 4.2), layout="constrained")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    FigureCanvasAgg(fig)
+    ax, axc = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
+    rows = [r for r in summary if r["param"] == param]
+    levels = sorted({_num(r[f"f_{factor}"]) for r in rows})
+    agg = []
+    for lv in levels:
+        rs = [r for r in rows if _num(r[f"f_{factor}"]) == lv]
+        agg.append([np.nanmean([_num(r[k]) for r in rs]) for k in
+                    ("bias", "rmse", "mean_width90", "coverage90", "coverage90_lo",
+                     "coverage90_hi")])
+    a = np.array(agg)
+    x = np.array(levels)
+    positive = np.all(x > 0)
+    xs = x if positive else np.arange(x.size)
+    ax.errorbar(xs, a[:, 0], yerr=a[:, 1], fmt="o-", capsize=3, label="bias +- RMSE")
+    ax.plot(xs, a[:, 2] / 2, "s--", label="half width of 90 % interval")
+    ax.axhline(0, color="0.4", lw=0.8)
+    ax.set_ylabel(f"{param} (theta)")
+    ax.legend(loc="best")
+    ax.set_title(f"{param} against {factor}")
+    axc.fill_between(xs, a[:, 4], a[:, 5], alpha=0.25, label="95 % interval")
+    axc.plot(xs, a[:, 3], "o-", label="coverage of 90 % HDI")
+    axc.axhline(0.9, color="C3", lw=0.8, ls=":", label="nominal 0.9")
+    axc.set_ylim(-0.05, 1.05)
+    axc.set_ylabel("coverage")
+    axc.legend(loc="lower left", ncols=3)
+    if positive and x.max() / x.min() > 20:
+        ax.set_xscale("log")
+    if not positive:
+        axc.set_xticks(xs, [f"{v:g}" for v in x])
+    axc.set_xlabel(_factor_label(factor))
+    return fig
+
+
+def _factor_label(factor: str) -> str:
+    units = {"noise_rms": "sensor noise RMS, m", "r1_rms": "r1 RMS, m", "r2_rms": "r2 RMS, A",
+             "duration": "record length, s", "amplitude": "excitation amplitude, A",
+             "dt": "sample time, s", "speed_rpm": "speed, rpm"}
+    return units.get(factor, factor)
+
+
+@styled
+def plot_sbc_ranks(sbc: dict[str, Any], n_bins: int = 10) -> Figure:
+    """Rank histograms of every parameter with the 99 % band of a uniform histogram."""
+    names = list(sbc)
+    cols = min(4, len(names))
+    rows = -(-len(names) // cols)
+    fig = Figure(figsize=(2.3 * cols + 0.6, 2.0 * rows + 0.6), layout="constrained")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    FigureCanvasAgg(fig)
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
+    for ax, n in zip(axes, names):
+        s = sbc[n]
+        hist = np.array(s["rank_hist"])
+        m = s["n"]
+        lo, hi = binomial_band(m, 1.0 / hist.size)
+        ax.axhspan(lo * m, hi * m, color="0.85", label="99 % band")
+        ax.bar(np.arange(hist.size), hist, width=0.9, color="C0")
+        ax.set_title(f"{n}: p = {s['uniformity_p']:.2f}", fontsize=9)
+        ax.set_xticks([])
+        ax.set_xlabel("rank of truth")
+    for ax in axes[len(names):]:
+        ax.set_visible(False)
+    axes[0].set_ylabel("datasets")
+    fig.suptitle(f"SBC rank histograms ({sbc[names[0]]['n']} datasets)")
+    return fig
+
+
+def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
+    """Write DIR/figures/*.png for a finished study; returns the paths."""
+    out = Path(out_dir)
+    figdir = out / "figures"
+    figdir.mkdir(exist_ok=True)
+    summary = _read_csv(out / "summary.csv")
+    paths = []
+    with style_context():
+        for factor in spec.factors:
+            if factor == "estimate" or not any(f"f_{factor}" in r for r in summary):
+                continue
+            for n in spec.estimate:
+                fig = plot_factor(summary, factor, n)
+                paths.append(save_figure(fig, figdir / f"{factor}_{n}.png"))
+        manifest = json.loads((out / "study.json").read_text(encoding="utf-8"))
+        if manifest.get("sbc"):
+            paths.append(save_figure(plot_sbc_ranks(manifest["sbc"]), figdir / "sbc_ranks.png"))
+    return paths
