@@ -27,7 +27,11 @@ from bayes_amb.simulate.truth import TruthPlant
 
 @dataclass(frozen=True)
 class LoopSignals:
-    """Simulated signals, each (n, 4): recorded y (m) and u (A), controller eps (m)."""
+    """Simulated signals, each (n, 4): recorded y (m) and u (A), controller eps (m).
+
+    ``unstable`` is True when the sampled closed loop has a pole on or outside the unit circle
+    (checked by eigenvalues, see :func:`closed_loop_spectral_radius`) or the signals diverged.
+    """
 
     y: NDArray
     u: NDArray
@@ -46,6 +50,46 @@ def delayed_input_matrices(A: NDArray, B: NDArray, dt: float, delay_s: float
     E1, G_rest = zoh(A, B, dt - phi)
     _, G_phi = zoh(A, B, phi)
     return Ad, m, G_rest, E1 @ G_phi
+
+
+_EIG_LIMIT = 1500   # largest closed-loop order whose eigenvalues are computed (dense eig)
+
+
+def closed_loop_spectral_radius(truth: TruthPlant,
+                                controller: tuple[NDArray, NDArray, NDArray, NDArray],
+                                dt: float) -> float:
+    """Spectral radius of the sampled closed loop that :func:`simulate_loop` runs.
+
+    States [x; x_k; u_p[k-1]; ...; u_p[k-m-1]] (plant, controller, held past plant inputs of
+    the delay line). Returns nan when the order exceeds an internal limit (1500).
+    """
+    Ak, Bk, Ck, Dk = (np.asarray(m, dtype=float) for m in controller)
+    Ad, m_del, G_now, G_prev = delayed_input_matrices(truth.A, truth.B, dt, truth.delay_s)
+    Cg = truth.sensor_gain[:, None] * truth.C
+    n, nk, nu = Ad.shape[0], Ak.shape[0], truth.B.shape[1]
+    size = n + nk + nu * (m_del + 1)
+    if size > _EIG_LIMIT:
+        return float("nan")
+    M = np.zeros((size, size))
+    sx, sk = slice(0, n), slice(n, n + nk)
+
+    def hist(j: int) -> slice:                      # u_p[k - j], j = 1..m_del+1
+        return slice(n + nk + (j - 1) * nu, n + nk + j * nu)
+
+    u_x, u_k = Dk[:nu, :nu] @ Cg, Ck[:nu]           # u_p[k] = u_x x + u_k x_k (inputs off)
+    M[sx, sx] = Ad
+    M[sk, sx] = Bk[:, :nu] @ Cg
+    M[sk, sk] = Ak
+    if m_del == 0:
+        M[sx, sx] += G_now @ u_x
+        M[sx, sk] += G_now @ u_k
+    else:
+        M[sx, hist(m_del)] += G_now
+    M[sx, hist(m_del + 1)] += G_prev
+    M[hist(1), sx], M[hist(1), sk] = u_x, u_k
+    for j in range(2, m_del + 2):
+        M[hist(j), hist(j - 1)] = np.eye(nu)
+    return float(np.max(np.abs(np.linalg.eigvals(M))))
 
 
 def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray, NDArray],
@@ -97,4 +141,6 @@ def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray
             break
     if unstable or not np.all(np.isfinite(y_rec)):
         unstable = True
+    elif closed_loop_spectral_radius(truth, (Ak, Bk, Ck, Dk), dt) >= 1.0:
+        unstable = True   # a growing but still finite response is no rig recording either
     return LoopSignals(y=y_rec, u=u_rec, eps=eps, unstable=unstable)

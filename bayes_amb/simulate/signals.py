@@ -34,14 +34,16 @@ def prbs(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
 
 
 def multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt: float,
-              band_hz: tuple[float, float] = (5.0, 1000.0), n_lines: int = 200) -> NDArray:
+              band_hz: tuple[float, float] | None = None, n_lines: int = 200) -> NDArray:
     """Random-phase multisine with flat amplitude over band_hz, peak scaled to amplitude.
+
+    band_hz None: 5 Hz to min(1000 Hz, 0.8 Nyquist), so the default also fits dt = 1e-3 s.
 
     Frequencies lie on the grid of the record (multiples of 1/(n dt)), so the signal is
     periodic over the record. Channels have independent phases.
     """
     f0 = 1.0 / (n * dt)
-    lo, hi = band_hz
+    lo, hi = (5.0, min(1000.0, 0.4 / dt)) if band_hz is None else band_hz
     if not (0 < lo < hi <= 0.5 / dt):
         raise BayesAmbError(f"multisine band {band_hz} Hz must satisfy 0 < lo < hi <= "
                             f"Nyquist {0.5 / dt:g} Hz")
