@@ -1,0 +1,298 @@
+"""The benchmarks: each fast path timed side by side with its baseline in the same process.
+
+Every benchmark returns a small frozen dataclass (bayes_amb.bench.results) with both
+timings and their ratio (``speedup`` = baseline time / our time). Times are medians over
+repeats after one warm-up call. Each benchmark first checks that the two sides compute the
+same thing and raises BenchmarkError if they do not, so that the ratio compares like with
+like. ``quick=True`` shrinks each benchmark to a smoke test of a few seconds.
+
+Run them with ``bayes-amb bench`` or ``benchmarks/run_all.py`` (see benchmarks/README.md).
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from collections.abc import Callable
+
+import control
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import lfilter
+
+from bayes_amb.bench.baselines import (
+    closed_loop_ss,
+    median_time,
+    naive_eval_us,
+    naive_log_likelihood,
+)
+from bayes_amb.bench.results import (
+    BenchmarkError,
+    LikelihoodBench,
+    MapBench,
+    MapRun,
+    ParamRecovery,
+    PosteriorBench,
+    Result,
+    SimulateBench,
+)
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.estimate import LogPosterior, find_map
+from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.inference.offline import dual_youla_eps
+from bayes_amb.inference.priors import PriorSet
+from bayes_amb.inference.whittle import WhittleLikelihood
+from bayes_amb.io.recording import Recording
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import SimulationConfig, build_truth, simulate_recording
+
+log = logging.getLogger(__name__)
+
+PARAMS_8 = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
+TRUE_8 = dict(zip(PARAMS_8, (0.1, -0.1, 0.2, 0.5, 0.3, -0.2, 0.1, 0.0), strict=True))
+CHECK_RTOL = 1e-9  # largest relative difference allowed between the two sides
+
+
+def make_recording(truth: str, params: dict[str, float], dt: float, duration: float,
+                   seed: int = 1, **noise: float) -> Recording:
+    """Closed-loop recording of the reference rig under its reference controller.
+
+    Parameters
+    ----------
+    truth : {"full", "reduced"}
+        Truth plant of the simulation.
+    params : dict
+        True theta values by parameter name.
+    dt, duration : float
+        Sample time and record length, in s.
+    seed : int
+        Seed of the simulation's random streams.
+    **noise : float
+        noise_rms, r1_rms (m), r2_rms (A), passed to SimulationConfig.
+
+    Returns
+    -------
+    Recording
+    """
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, dt), rig)
+    cfg = SimulationConfig(truth=truth, params=params, dt=dt, duration=duration, seed=seed,
+                           **noise)
+    return simulate_recording(rig, ctrl, cfg)[0]
+
+
+def _posterior(rec: Recording, names: tuple[str, ...]
+               ) -> tuple[ForwardModel, NDArray, LogPosterior]:
+    fm = ForwardModel(rec, names)
+    eps = dual_youla_eps(fm.parts, np.asarray(rec.y), np.asarray(rec.u))
+    return fm, eps, LogPosterior(WhittleLikelihood(fm, eps), PriorSet.build(names))
+
+
+def _ball(theta: NDArray, n: int, rng: np.random.Generator, spread: float = 1e-3) -> NDArray:
+    """n points [theta, log10 sigma] scattered by spread around theta (walkers near it)."""
+    sig = np.tile([np.log10(2e-8), -10.0, np.log10(0.05)], (n, 1))
+    return np.hstack([theta + spread * rng.standard_normal((n, theta.size)), sig])
+
+
+def bench_likelihood(quick: bool = False, batch: int = 32) -> LikelihoodBench:
+    """Fast log posterior against the naive likelihood: 8 parameters, 5000 samples x 4.
+
+    The record: reduced truth at TRUE_8, 0.5 s at dt = 1e-4 s, noise_rms 2e-8 m, r2_rms
+    0.05 A. Fast side: ``LogPosterior(WhittleLikelihood(...), PriorSet.build(...))`` on
+    batches of ``batch`` parameter vectors near the truth (emcee passes half the ensemble
+    as one batch); per-evaluation time = batch time / batch. Baseline:
+    :func:`~bayes_amb.bench.baselines.naive_log_likelihood`, one vector per call. Before
+    timing, the DFT of the forced_response residual at the truth (through the likelihood's
+    prewhitening FIR) is checked against the fast path's residual DFT (relative difference
+    below CHECK_RTOL).
+
+    Parameters
+    ----------
+    quick : bool
+        Fewer repeats (3 instead of 15 batches and 9 naive evaluations).
+    batch : int
+        Parameter vectors per fast call.
+
+    Returns
+    -------
+    LikelihoodBench
+    """
+    rec = make_recording("reduced", TRUE_8, 1e-4, 0.5, noise_rms=2e-8, r2_rms=0.05)
+    fm, eps, post = _posterior(rec, PARAMS_8)
+    theta = np.array([TRUE_8[n] for n in PARAMS_8])
+    like = post.likelihood
+    r_time = naive_log_likelihood(fm, eps, _ball(theta, 1, np.random.default_rng(0), 0.0)[0])[1]
+    # the likelihood sees the residual through its prewhitening FIR (1 when there is none)
+    ref = np.fft.rfft(lfilter(like.prefilter, [1.0], r_time, axis=0), axis=0)[like.k]
+    fast = like.residual_dft(theta[None])[0][0] * like.scale
+    err = float(np.max(np.abs(fast - ref)) / np.max(np.abs(ref)))
+    if not err < CHECK_RTOL:
+        raise BenchmarkError(f"likelihood benchmark: the DFT residual differs from the "
+                             f"forced_response residual by {err:.2e}; expected < {CHECK_RTOL}")
+    points = _ball(theta, batch, np.random.default_rng(0))
+    repeats = 3 if quick else 15
+    fast_us = 1e6 * median_time(lambda: post(points), repeats) / batch
+    base_us = naive_eval_us(fm, eps, points, 3 if quick else 9)
+    return LikelihoodBench(likelihood_us=fast_us, baseline_us=base_us,
+                           speedup=base_us / fast_us, n_params=len(PARAMS_8),
+                           n_samples=rec.n_samples, batch=batch, repeats=repeats,
+                           residual_rel_err=err)
+
+
+def bench_posterior(quick: bool = False) -> PosteriorBench:
+    """``identify`` of 8 parameters from 1 s at 10 kHz of the full (320-state) truth.
+
+    True theta TRUE_8, sensor noise 2e-7 m, r1 1e-7 m, r2 0.02 A, seed 2; the sampler runs
+    to 50 tau (its own stopping rule). The baseline is an estimate, not a run: the
+    posterior's likelihood evaluations times the naive per-evaluation cost
+    (:func:`~bayes_amb.bench.baselines.naive_eval_us`, measured on this record).
+
+    Parameters
+    ----------
+    quick : bool
+        Smoke test: k_By and c_By from 0.2 s, 100 fixed steps (not converged).
+
+    Returns
+    -------
+    PosteriorBench
+    """
+    names = ("k_By", "c_By") if quick else PARAMS_8
+    truth = {n: TRUE_8[n] for n in names}
+    rec = make_recording("full", truth, 1e-4, 0.2 if quick else 1.0, seed=2,
+                         noise_rms=2e-7, r1_rms=1e-7, r2_rms=0.02)
+    s = identify(rec, names, options=IdentifyOptions(steps=100 if quick else None)).summary
+    pars = tuple(ParamRecovery(name=n, true=truth[n], mean=v["mean"], sd=v["sd"],
+                               bias=v["mean"] - truth[n], r_hat=v["r_hat"],
+                               ess_bulk=v["ess_bulk"])
+                 for n, v in s["parameters"].items())
+    fm, eps, _ = _posterior(rec, names)
+    theta = np.array([truth[n] for n in names])
+    eval_us = naive_eval_us(fm, eps, _ball(theta, 8, np.random.default_rng(1)),
+                            2 if quick else 7)
+    samp = s["sampler"]
+    est = samp["likelihood_evals"] * eval_us * 1e-6
+    min_ess = min(p.ess_bulk for p in pars)
+    return PosteriorBench(
+        n_params=len(names), n_samples=rec.n_samples, posterior_s=samp["wall_s"],
+        wall_s=s["wall_s"], ess_per_s=min_ess / samp["wall_s"], converged=s["converged"],
+        max_r_hat=max(p.r_hat for p in pars), min_ess=min_ess, n_tau=samp["n_tau"],
+        steps=samp["steps"], walkers=samp["walkers"], fixed_steps=quick,
+        likelihood_evals=samp["likelihood_evals"], baseline_eval_us=eval_us,
+        baseline_posterior_s_estimated=est, speedup_estimated=est / s["wall_s"],
+        parameters=pars)
+
+
+def bench_simulate(quick: bool = False) -> SimulateBench:
+    """``simulate_recording`` with the full 320-state truth, 0.5 s at 10 kHz.
+
+    Baseline: ``control.forced_response`` on the same closed loop assembled explicitly
+    (:func:`~bayes_amb.bench.baselines.closed_loop_ss`) from the given excitation; the truth
+    plant, ZOH and assembly are timed on both sides. The two displacement records must
+    agree to CHECK_RTOL. Requirement: simulate_s below 2 s.
+
+    Parameters
+    ----------
+    quick : bool
+        0.1 s instead of 0.5 s, 2 repeats instead of 7.
+
+    Returns
+    -------
+    SimulateBench
+    """
+    dt, duration = 1e-4, 0.1 if quick else 0.5
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, dt), rig)
+    cfg = SimulationConfig(truth="full", dt=dt, duration=duration)
+    rec, truth = simulate_recording(rig, ctrl, cfg)
+    eta = np.asarray(rec.excitation["eta"])
+    n_states = build_truth(rig, truth["speed_rpm"], "full").n_states
+
+    def baseline() -> NDArray:
+        tp = build_truth(rig, truth["speed_rpm"], "full")
+        sys = closed_loop_ss(tp.A, tp.B, tp.C, ctrl, dt)
+        return np.asarray(control.forced_response(sys, U=eta.T).outputs).T
+
+    y = np.asarray(rec.y)
+    diff = float(np.max(np.abs(baseline()[:, :4] - y)) / np.max(np.abs(y)))
+    if not diff < CHECK_RTOL:
+        raise BenchmarkError(f"simulate benchmark: the forced_response y differs from the "
+                             f"simulate_recording y by {diff:.2e}; expected < {CHECK_RTOL}")
+    repeats = 2 if quick else 7
+    ours = median_time(lambda: simulate_recording(rig, ctrl, cfg), repeats)
+    base = median_time(baseline, repeats)
+    return SimulateBench(simulate_s=ours, baseline_s=base, speedup=base / ours,
+                         n_states=n_states, n_samples=rec.n_samples, requirement_s=2.0,
+                         max_rel_diff=diff)
+
+
+def bench_map(quick: bool = False) -> MapBench:
+    """MAP of the paper's case: L-BFGS-B against Nelder-Mead (the paper's fminsearch).
+
+    Reduced truth, k_By = 0.5, dt = 1e-3 s, 0.5 s, no noise; k_By estimated. Each search
+    runs ``find_map`` on a fresh posterior; the wall time is the median over repeats.
+
+    Parameters
+    ----------
+    quick : bool
+        0.2 s instead of 0.5 s, one search per method instead of three.
+
+    Returns
+    -------
+    MapBench
+    """
+    rec = make_recording("reduced", {"k_By": 0.5}, 1e-3, 0.2 if quick else 0.5)
+    runs = {}
+    for method in ("lbfgs", "nelder-mead"):
+        walls = []
+        for _ in range(1 if quick else 3):
+            post = _posterior(rec, ("k_By",))[2]
+            t0 = time.perf_counter()
+            m = find_map(post, method)
+            walls.append(time.perf_counter() - t0)
+        runs[method] = MapRun(method=method, wall_s=float(np.median(walls)),
+                              n_evals=m.n_evals, theta=float(m.theta[0]),
+                              abs_error=abs(float(m.theta[0]) - 0.5), log_post=m.log_post)
+    lb, nm = runs["lbfgs"], runs["nelder-mead"]
+    return MapBench(lbfgs=lb, nelder_mead=nm, speedup=nm.wall_s / lb.wall_s,
+                    eval_ratio=nm.n_evals / lb.n_evals)
+
+
+BENCHMARKS: dict[str, Callable[..., Result]] = {
+    "likelihood": bench_likelihood, "posterior": bench_posterior,
+    "simulate": bench_simulate, "map": bench_map}
+
+
+def run_benchmarks(names: list[str] | tuple[str, ...] | None = None, quick: bool = False
+                   ) -> dict[str, Result]:
+    """Run the named benchmarks in BENCHMARKS order.
+
+    Parameters
+    ----------
+    names : sequence of str, optional
+        Names from BENCHMARKS (default: all).
+    quick : bool
+        Passed to each benchmark.
+
+    Returns
+    -------
+    dict
+        Benchmark name -> result dataclass.
+
+    Raises
+    ------
+    BayesAmbError
+        For an unknown benchmark name.
+    """
+    names = list(BENCHMARKS) if not names else list(names)
+    unknown = [n for n in names if n not in BENCHMARKS]
+    if unknown:
+        raise BayesAmbError(f"option --only: unknown benchmark {unknown[0]!r}; known: "
+                            f"{', '.join(BENCHMARKS)}")
+    out = {}
+    for n in BENCHMARKS:
+        if n in names:
+            log.info("benchmark %s%s", n, " (quick)" if quick else "")
+            out[n] = BENCHMARKS[n](quick=quick)
+    return out

@@ -1,0 +1,212 @@
+"""Result objects of the benchmarks: small frozen dataclasses holding the numbers.
+
+Times are in seconds (``*_s``) or microseconds (``*_us``). ``speedup`` is always the
+baseline's time divided by ours: above 1 we are faster, below 1 the baseline is.
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+from dataclasses import asdict, dataclass
+from typing import Any
+
+import numpy as np
+
+
+class BenchmarkError(RuntimeError):
+    """The two sides of a benchmark disagree, so their timings must not be compared."""
+
+
+class Result:
+    """Base of the benchmark results."""
+
+    def to_dict(self) -> dict[str, Any]:
+        """Plain dict of the numbers (nested results become dicts, tuples lists)."""
+        return asdict(self)  # type: ignore[call-overload]
+
+
+@dataclass(frozen=True)
+class LikelihoodBench(Result):
+    """Cost of one log-posterior evaluation, fast path against the naive baseline.
+
+    Attributes
+    ----------
+    likelihood_us, baseline_us : float
+        Median time of one evaluation, in us: fast (batch time / batch) and naive
+        (forced_response + iid Gaussian log-likelihood).
+    speedup : float
+        baseline_us / likelihood_us.
+    n_params, n_samples, batch, repeats : int
+        Parameters, samples per channel (4 channels), vectors per fast call, timed calls.
+    residual_rel_err : float
+        Largest relative difference between the two residual DFTs at the truth.
+    """
+
+    likelihood_us: float
+    baseline_us: float
+    speedup: float
+    n_params: int
+    n_samples: int
+    batch: int
+    repeats: int
+    residual_rel_err: float
+
+
+@dataclass(frozen=True)
+class ParamRecovery(Result):
+    """Posterior of one parameter, in theta units (bias = mean - true)."""
+
+    name: str
+    true: float
+    mean: float
+    sd: float
+    bias: float
+    r_hat: float
+    ess_bulk: float
+
+
+@dataclass(frozen=True)
+class PosteriorBench(Result):
+    """A full ``identify`` run and the estimated cost of the same run done naively.
+
+    Attributes
+    ----------
+    posterior_s, wall_s : float
+        Sampler wall time and total identify wall time (MAP, sampling, summary), in s.
+    ess_per_s : float
+        Smallest bulk ESS over the parameters / posterior_s.
+    converged, max_r_hat, min_ess, n_tau : bool, float, float, float
+        Diagnostics of the run (n_tau: chain length in autocorrelation times).
+    steps, walkers, fixed_steps : int, int, bool
+        Sampler settings (fixed_steps: quick mode, not run to 50 tau).
+    likelihood_evals : int
+        Log-posterior evaluations of the whole run (MAP included).
+    baseline_eval_us : float
+        Naive cost of one evaluation on this record, in us.
+    baseline_posterior_s_estimated : float
+        likelihood_evals x baseline_eval_us, in s: an estimate, not a timed run.
+    speedup_estimated : float
+        baseline_posterior_s_estimated / wall_s.
+    parameters : tuple of ParamRecovery
+    """
+
+    n_params: int
+    n_samples: int
+    posterior_s: float
+    wall_s: float
+    ess_per_s: float
+    converged: bool
+    max_r_hat: float
+    min_ess: float
+    n_tau: float
+    steps: int
+    walkers: int
+    fixed_steps: bool
+    likelihood_evals: int
+    baseline_eval_us: float
+    baseline_posterior_s_estimated: float
+    speedup_estimated: float
+    parameters: tuple[ParamRecovery, ...]
+
+
+@dataclass(frozen=True)
+class SimulateBench(Result):
+    """Closed-loop simulation of the full truth against forced_response.
+
+    Attributes
+    ----------
+    simulate_s, baseline_s : float
+        Median wall time of simulate_recording and of the forced_response baseline, in s.
+    speedup : float
+        baseline_s / simulate_s.
+    n_states, n_samples : int
+        Truth-plant states and samples simulated.
+    requirement_s : float
+        The time simulate_s must stay under, in s.
+    max_rel_diff : float
+        Largest relative difference between the displacements of the two.
+    """
+
+    simulate_s: float
+    baseline_s: float
+    speedup: float
+    n_states: int
+    n_samples: int
+    requirement_s: float
+    max_rel_diff: float
+
+
+@dataclass(frozen=True)
+class MapRun(Result):
+    """One MAP search: median wall time (s), log-posterior evaluations, estimate of theta,
+    its absolute error and the log posterior reached."""
+
+    method: str
+    wall_s: float
+    n_evals: int
+    theta: float
+    abs_error: float
+    log_post: float
+
+
+@dataclass(frozen=True)
+class MapBench(Result):
+    """MAP by L-BFGS-B against Nelder-Mead (the paper's fminsearch); speedup is the wall
+    time ratio nelder_mead / lbfgs, eval_ratio the ratio of evaluations."""
+
+    lbfgs: MapRun
+    nelder_mead: MapRun
+    speedup: float
+    eval_ratio: float
+
+
+def environment() -> dict[str, Any]:
+    """What the timings depend on: versions, CPU count and BLAS thread settings.
+
+    Returns
+    -------
+    dict
+        Versions of bayes_amb, Python, numpy, scipy and python-control, the machine, the
+        CPU count and OPENBLAS_NUM_THREADS / OMP_NUM_THREADS (None when unset).
+    """
+    import control
+    import scipy
+
+    from bayes_amb import __version__
+    return {"bayes_amb": __version__, "python": platform.python_version(),
+            "numpy": np.__version__, "scipy": scipy.__version__, "control": control.__version__,
+            "machine": platform.machine(), "cpu_count": os.cpu_count(),
+            "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
+            "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS")}
+
+
+def _finite_or_none(obj: Any) -> Any:
+    if isinstance(obj, dict):
+        return {k: _finite_or_none(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_finite_or_none(v) for v in obj]
+    if isinstance(obj, float) and not np.isfinite(obj):
+        return None
+    return obj
+
+
+def report(results: dict[str, Result], quick: bool) -> dict[str, Any]:
+    """The JSON document of a benchmark run (what ``bayes-amb bench --json`` prints).
+
+    Parameters
+    ----------
+    results : dict
+        Benchmark name -> result, as returned by ``run_benchmarks``.
+    quick : bool
+        Whether the smoke-test sizes were used.
+
+    Returns
+    -------
+    dict
+        ``quick``, ``environment`` (:func:`environment`) and one dict per benchmark under
+        its name; non-finite numbers (e.g. R-hat of a too-short chain) become None.
+    """
+    out: dict[str, Any] = {"quick": bool(quick), "environment": environment()}
+    out.update({name: r.to_dict() for name, r in results.items()})
+    return _finite_or_none(out)

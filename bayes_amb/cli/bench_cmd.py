@@ -1,0 +1,128 @@
+"""`bayes-amb bench`: the benchmarks, each against its baseline run side by side."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from typing import Any
+
+from bayes_amb.bench import BENCHMARKS, report, run_benchmarks
+from bayes_amb.cli.common import emit
+from bayes_amb.errors import BayesAmbError
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("bench", help="run the benchmarks (ratios against baselines)",
+                       description="Time the fast paths against their baselines in the same "
+                       "process and print both and the ratio (speedup = baseline / ours). "
+                       "Benchmarks: " + ", ".join(BENCHMARKS) + ". The full set takes about "
+                       "1.5 minutes; set OPENBLAS_NUM_THREADS=1 for comparable figures.")
+    p.add_argument("--only", default=None, metavar="NAME,...",
+                   help="comma-separated benchmarks to run (default: all)")
+    p.add_argument("--quick", action="store_true",
+                   help="smoke-test sizes (seconds; the figures are not representative)")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=run)
+
+
+def selected(only: str | None) -> list[str]:
+    """Benchmark names of --only in BENCHMARKS order (all when None)."""
+    if only is None:
+        return list(BENCHMARKS)
+    names = [n.strip() for n in only.split(",") if n.strip()]
+    unknown = [n for n in names if n not in BENCHMARKS]
+    if unknown or not names:
+        raise BayesAmbError(f"option --only: unknown benchmark {(unknown or [only])[0]!r}; "
+                            f"known: {', '.join(BENCHMARKS)}")
+    return [n for n in BENCHMARKS if n in names]
+
+
+def _num(v: float | None, spec: str) -> str:
+    """Format v, or "-" where the run gave no finite value (None)."""
+    return "-" if v is None else format(v, spec)
+
+
+def _us(v: float) -> str:
+    return f"{v:.0f} us" if v < 1e4 else f"{v / 1e3:.1f} ms"
+
+
+def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
+    rows = []
+    if "likelihood" in d:
+        r = d["likelihood"]
+        rows.append(("likelihood", f"{_us(r['likelihood_us'])}/eval",
+                     f"{_us(r['baseline_us'])}/eval", f"{r['speedup']:.1f}x"))
+    if "posterior" in d:
+        r = d["posterior"]
+        rows.append(("posterior", f"{r['posterior_s']:.1f} s sampling ({r['wall_s']:.1f} total)",
+                     f"~{r['baseline_posterior_s_estimated']:.0f} s (estimated)",
+                     f"~{r['speedup_estimated']:.0f}x"))
+    if "simulate" in d:
+        r = d["simulate"]
+        rows.append(("simulate", f"{r['simulate_s']:.3f} s", f"{r['baseline_s']:.3f} s",
+                     f"{r['speedup']:.2f}x"))
+    if "map" in d:
+        lb, nm = d["map"]["lbfgs"], d["map"]["nelder_mead"]
+        rows.append(("map", f"{lb['wall_s']:.2f} s, {lb['n_evals']} evals",
+                     f"{nm['wall_s']:.2f} s, {nm['n_evals']} evals",
+                     f"{d['map']['speedup']:.1f}x"))
+    return rows
+
+
+def _details(d: dict[str, Any]) -> list[str]:
+    out = []
+    if "likelihood" in d:
+        r = d["likelihood"]
+        out.append(f"likelihood: {r['n_params']} parameters, {r['n_samples']} samples x 4, "
+                   f"batch {r['batch']}; baseline forced_response + iid Gaussian; residual "
+                   f"DFT check {r['residual_rel_err']:.1e}")
+    if "posterior" in d:
+        r = d["posterior"]
+        out.append(f"posterior: {r['n_params']} parameters, {r['n_samples']} samples, "
+                   f"{'converged' if r['converged'] else 'NOT converged'}"
+                   f"{' (fixed steps)' if r['fixed_steps'] else ''}, {r['steps']} steps x "
+                   f"{r['walkers']} walkers = {_num(r['n_tau'], '.0f')} tau, max R-hat "
+                   f"{_num(r['max_r_hat'], '.3f')}, min ESS {_num(r['min_ess'], '.0f')}, "
+                   f"{_num(r['ess_per_s'], '.1f')} ESS/s; {r['likelihood_evals']} evaluations"
+                   f" x {_us(r['baseline_eval_us'])} naive = the estimated baseline")
+        out.append(f"  {'param':<6} {'true':>7} {'mean':>8} {'sd':>7} {'bias/sd':>8} "
+                   f"{'R-hat':>6} {'ESS':>6}")
+        for p in r["parameters"]:
+            z = p["bias"] / p["sd"] if p["sd"] else None
+            out.append(f"  {p['name']:<6} {p['true']:>7.3f} {p['mean']:>8.4f} {p['sd']:>7.4f} "
+                       f"{_num(z, '>+8.2f')} {_num(p['r_hat'], '>6.3f')} "
+                       f"{_num(p['ess_bulk'], '>6.0f')}")
+    if "simulate" in d:
+        r = d["simulate"]
+        ok = "met" if r["simulate_s"] < r["requirement_s"] else "NOT met"
+        out.append(f"simulate: {r['n_states']}-state full truth, {r['n_samples']} samples; "
+                   f"under {r['requirement_s']:g} s: {ok}; y check {r['max_rel_diff']:.1e}")
+    if "map" in d:
+        m = d["map"]
+        out.append("map: paper's case (k_By = 0.5); " + "; ".join(
+            f"{v['method']} theta {v['theta']:.6f} (error {v['abs_error']:.1e}, log post "
+            f"{v['log_post']:.1f})" for v in (m["lbfgs"], m["nelder_mead"])))
+    return out
+
+
+def format_text(d: dict[str, Any]) -> str:
+    """The human-readable table of a `bench --json` dict."""
+    env = d["environment"]
+    head = (f"bayes-amb bench{' --quick' if d['quick'] else ''}: speedup = baseline / ours "
+            f"(OPENBLAS_NUM_THREADS={env['OPENBLAS_NUM_THREADS']}, {env['cpu_count']} CPUs)")
+    rows = [("benchmark", "ours", "baseline", "speedup"), *_rows(d)]
+    w = [max(len(r[i]) for r in rows) for i in range(4)]
+    lines = [head, ""] + [f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {s:>{w[3]}}"
+                          for a, b, c, s in rows]
+    return "\n".join([*lines, "", *_details(d)])
+
+
+def run(args: argparse.Namespace) -> int:
+    results = {}
+    for n in selected(args.only):
+        if not args.json:
+            sys.stderr.write(f"running {n}{' (quick)' if args.quick else ''} ...\n")
+        results.update(run_benchmarks([n], quick=args.quick))
+    data = report(results, args.quick)
+    emit(data, format_text(data), args.json)
+    return 0

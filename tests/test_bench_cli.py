@@ -1,0 +1,114 @@
+"""`bayes-amb bench --quick`: it runs, prints every key, and its side-by-side checks hold.
+
+No timing assertions: speed is measured in benchmarks, never asserted in tests. What is
+asserted here can fail: each benchmark's two sides must compute the same thing (residual
+DFT against forced_response, simulated displacements against forced_response), and both
+MAP searches must find the paper's k_By = 0.5 from noise-free data.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+
+import pytest
+
+from bayes_amb.cli.bench_cmd import format_text
+from bayes_amb.cli.main import main
+
+KEYS = {
+    "likelihood": {"likelihood_us", "baseline_us", "speedup", "n_params", "n_samples",
+                   "batch", "repeats", "residual_rel_err"},
+    "posterior": {"posterior_s", "wall_s", "ess_per_s", "converged", "max_r_hat", "min_ess",
+                  "n_tau", "likelihood_evals", "baseline_eval_us",
+                  "baseline_posterior_s_estimated", "speedup_estimated", "parameters"},
+    "simulate": {"simulate_s", "baseline_s", "speedup", "n_states", "n_samples",
+                 "requirement_s", "max_rel_diff"},
+    "map": {"lbfgs", "nelder_mead", "speedup", "eval_ratio"},
+}
+TIMES = {"likelihood": ("likelihood_us", "baseline_us"),
+         "posterior": ("posterior_s", "wall_s", "baseline_posterior_s_estimated"),
+         "simulate": ("simulate_s", "baseline_s")}
+
+
+@pytest.fixture(scope="module")
+def bench_json():
+    """`bayes-amb bench --quick --json`, run once for the module."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["bench", "--quick", "--json"])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue())
+
+
+def test_json_has_every_benchmark_and_key(bench_json):
+    assert bench_json["quick"] is True
+    assert bench_json["environment"]["cpu_count"] >= 1
+    for name, keys in KEYS.items():
+        missing = keys - set(bench_json[name])
+        assert not missing, f"{name}: missing {sorted(missing)}"
+        for k in TIMES.get(name, ()):
+            v = bench_json[name][k]
+            assert math.isfinite(v) and v > 0, f"{name}.{k} = {v}"
+    for run in ("lbfgs", "nelder_mead"):
+        assert {"wall_s", "n_evals", "theta", "log_post"} <= set(bench_json["map"][run])
+
+
+def test_sides_compute_the_same_thing(bench_json):
+    # the time-domain forced_response residual and the fast DFT residual (rounding only)
+    assert bench_json["likelihood"]["residual_rel_err"] < 1e-9
+    # simulate_recording against forced_response on the explicit closed loop
+    assert bench_json["simulate"]["max_rel_diff"] < 1e-9
+    assert bench_json["simulate"]["n_states"] == 320
+    assert bench_json["likelihood"]["n_samples"] == 5000
+
+
+def test_map_methods_recover_the_paper_value(bench_json):
+    # noise-free reduced truth with k_By = 0.5: both searches must land on it
+    for run in ("lbfgs", "nelder_mead"):
+        assert bench_json["map"][run]["theta"] == pytest.approx(0.5, abs=1e-6)
+
+
+def test_posterior_quick_reports_each_parameter(bench_json):
+    post = bench_json["posterior"]
+    assert post["fixed_steps"] is True
+    names = [p["name"] for p in post["parameters"]]
+    assert names == ["k_By", "c_By"]
+    for p in post["parameters"]:
+        assert p["bias"] == pytest.approx(p["mean"] - p["true"])
+        assert p["sd"] > 0
+
+
+def test_text_table_names_every_benchmark(bench_json):
+    text = format_text(bench_json)
+    for name in KEYS:
+        assert any(line.startswith(name) for line in text.splitlines()), name
+    assert "speedup" in text and "estimated" in text
+
+
+def test_text_output_of_cli(capsys):
+    assert main(["bench", "--quick", "--only", "simulate"]) == 0
+    out = capsys.readouterr().out
+    assert out.splitlines()[0].startswith("bayes-amb bench --quick")
+    rows = [ln.split()[0] for ln in out.splitlines() if ln.split()[:1] and ln.split()[0] in KEYS]
+    assert rows == ["simulate"]          # table row of the one benchmark run, no other
+
+
+@pytest.mark.parametrize("only", ["nope", "likelihood,nope", ","])
+def test_unknown_benchmark_is_a_one_line_error(only, capsys):
+    assert main(["bench", "--quick", "--only", only]) == 2
+    out, err = capsys.readouterr()
+    assert out == ""
+    assert err.count("\n") == 1
+    assert "option --only" in err and "known: likelihood, posterior, simulate, map" in err
+
+
+def test_text_table_shows_missing_diagnostics_as_dash(bench_json):
+    # a too-short chain can give no finite R-hat or ESS (None in the JSON)
+    data = json.loads(json.dumps(bench_json))
+    data["posterior"]["max_r_hat"] = None
+    data["posterior"]["parameters"][0]["r_hat"] = None
+    line = next(ln for ln in format_text(data).splitlines() if ln.startswith("posterior:"))
+    assert "max R-hat -," in line
