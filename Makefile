@@ -29,7 +29,7 @@ test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q
 
 bench: $(STAMP)
-	$(VENV)/bin/bayes-amb bench
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/bayes-amb bench
 
 lint: $(STAMP)
 	$(PY) -m ruff check bayes_amb tests

@@ -199,16 +199,15 @@ class WhittleLikelihood:
         out[~stable] = np.inf
         return out
 
-    _PAIRS = [(i, j) for i in range(4) for j in range(i, 4)]
+    _I, _J = np.triu_indices(4)
 
     def _band_sums(self, R: NDArray) -> NDArray:
         """P_b = sum over the bins of each band of R_k R_k^H (only the 10 unique entries)."""
-        prods = np.stack([R[..., i] * np.conj(R[..., j]) for i, j in self._PAIRS], axis=-1)
+        prods = R[..., self._I] * np.conj(R[..., self._J])
         sums = np.add.reduceat(prods, self.starts, axis=1)           # (nb, nbands, 10)
         P = np.empty((*sums.shape[:2], 4, 4), dtype=complex)
-        for c, (i, j) in enumerate(self._PAIRS):
-            P[..., i, j] = sums[..., c]
-            P[..., j, i] = np.conj(sums[..., c])
+        P[..., self._I, self._J] = sums
+        P[..., self._J, self._I] = np.conj(sums)
         return P
 
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
@@ -218,7 +217,8 @@ class WhittleLikelihood:
         R, stable = self.residual_dft(theta)
         Pb = self._band_sums(R)                                     # (nb, nbands, 4, 4)
         sig2 = 10.0 ** (2 * ls)
-        Phi = np.einsum("bs,sqij->bqij", sig2, self.phi_sources) * self.n
+        ps = self.phi_sources
+        Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
         logdet, quad, ok = _logdet_and_trace(Phi, Pb)
         ll = -(self.counts * (logdet + 4 * np.log(np.pi)) + quad)
         bad = ~stable | ~np.all(ok, axis=1) | ~np.all(np.isfinite(ll), axis=1)
