@@ -157,3 +157,26 @@ def plot_rotor_sketch(rig: Rig, ax: Axes | None = None) -> Figure:
     ax.grid(False)
     ax.legend(loc="lower center", bbox_to_anchor=(0.5, 1.08), ncols=3, fontsize=8)
     return fig
+
+
+def fidelity_figure(rig: Rig, speed_rpm: float | None = None, n_bending: int = 0,
+                    path: str | None = None) -> Figure:
+    """The paper's Fig. 5 in one call: reduce the rig's FE model and plot full against
+    reduced singular values from 1 to 5e4 rad/s; saved to ``path`` when given.
+
+    Examples
+    --------
+    >>> from bayes_amb.rig import load_rig
+    >>> fig = fidelity_figure(load_rig())
+    >>> fig.axes[0].get_ylabel()
+    'singular value (dB re 1 m/A)'
+    """
+    from bayes_amb.plots.style import save_figure
+    from bayes_amb.reduction import reduce_pseudo_modal
+    from bayes_amb.reduction.fidelity import singular_value_data
+
+    fig = plot_singular_values(singular_value_data(
+        reduce_pseudo_modal(rig, n_bending=n_bending, speed_rpm=speed_rpm)))
+    if path is not None:
+        save_figure(fig, path)
+    return fig
