@@ -44,8 +44,10 @@ class SamplerRun:
 
 
 def initial_ball(post: LogPosterior, center: NDArray, cov: NDArray | None, n_walkers: int,
-                 rng: np.random.Generator, scale: float = 0.1) -> NDArray:
-    """Walker starting points around center with finite log posterior."""
+                 rng: np.random.Generator, scale: float = 1.0) -> NDArray:
+    """Walker starting points with finite log posterior: draws from the Laplace approximation
+    N(center, scale^2 cov) when available (the ensemble then starts near stationarity), else
+    a small ball."""
     d = center.size
     if cov is not None:
         chol = np.linalg.cholesky(cov * scale**2 + 1e-18 * np.eye(d))
