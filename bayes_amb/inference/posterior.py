@@ -3,8 +3,6 @@ identifiability statement."""
 
 from __future__ import annotations
 
-import os
-import tempfile
 from pathlib import Path
 from typing import Any
 
@@ -14,6 +12,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bayes_amb.inference.priors import PriorSet
+from bayes_amb.io.atomic import write_netcdf_atomic
 from bayes_amb.inference.whittle import NOISE_SOURCES, WhittleLikelihood
 from bayes_amb.rig import Rig
 from bayes_amb.uncertainty import get_spec
@@ -63,15 +62,7 @@ def to_datatree(names: tuple[str, ...], samples: NDArray, log_post: NDArray,
 
 def save_datatree(dt: xr.DataTree, path: str | Path) -> None:
     """Write NetCDF atomically (temporary file in the same folder, then rename)."""
-    path = Path(path)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        dt.to_netcdf(tmp, engine="h5netcdf")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_netcdf_atomic(dt, path)
 
 
 def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import re
-import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +28,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.errors import ParameterError
+from bayes_amb.tomlfile import read_toml
 from bayes_amb.uncertainty import get_spec
 
 NOISE_LOG10_BOUNDS = {"sigma_noise": (-12.0, -3.0), "sigma_r1": (-12.0, -3.0),
@@ -120,12 +120,7 @@ def parse_prior_assignment(text: str) -> tuple[str, Prior]:
 def load_prior_file(path: str | Path) -> dict[str, Prior]:
     """Priors from a TOML file with a [priors] table of NAME = "kind(a, b)"."""
     p = Path(path)
-    if not p.is_file():
-        raise ParameterError(f"prior file {p}: field <file>: not found")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ParameterError(f"prior file {p}: field <toml>: not valid TOML ({exc})") from None
+    data = read_toml(p, "prior file", ParameterError)
     table = data.get("priors")
     if not isinstance(table, dict):
         raise ParameterError(f"prior file {p}: field priors: missing or not a table")

@@ -250,3 +250,9 @@ def read_json(path: str | os.PathLike[str], where: str,
     if not isinstance(data, dict):
         raise error(f"{where}: field <top>: expected a JSON object, got {type(data).__name__}")
     return data
+
+
+def write_netcdf_atomic(obj: Any, path: str | os.PathLike[str]) -> None:
+    """Write an xarray Dataset or DataTree to NetCDF (h5netcdf) atomically."""
+    with atomic_path(path) as tmp:
+        obj.to_netcdf(tmp, engine="h5netcdf")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import RigError
+from bayes_amb.tomlfile import read_toml
 
 CHANNELS: tuple[str, ...] = ("Ax", "Ay", "Bx", "By")
 """Channel names of inputs (currents) and outputs (displacements), in this order."""
@@ -259,11 +260,4 @@ def load_rig(path: str | Path | None = None) -> Rig:
     if path is None or str(path) == "reference":
         text = resources.files("bayes_amb.rig").joinpath("data/reference.toml").read_text()
         return rig_from_dict(tomllib.loads(text), source="reference")
-    p = Path(path)
-    if not p.is_file():
-        raise RigError(f"rig file {p}: field <file>: not found")
-    try:
-        data = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise RigError(f"rig file {p}: field <toml>: not valid TOML ({exc})") from None
-    return rig_from_dict(data, source=str(p))
+    return rig_from_dict(read_toml(path, "rig file", RigError), source=str(Path(path)))

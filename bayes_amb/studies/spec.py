@@ -37,12 +37,12 @@ value, and ``estimate`` (a comma-separated parameter list).
 from __future__ import annotations
 
 import itertools
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.tomlfile import read_toml
 from bayes_amb.inference.priors import parse_prior
 from bayes_amb.simulate import SimulationConfig, parse_effect
 from bayes_amb.uncertainty import get_spec, parse_param_list
@@ -203,14 +203,7 @@ def _known(name: str) -> bool:
 
 
 def load_study(path: str | Path) -> StudySpec:
-    p = Path(path)
-    if not p.is_file():
-        raise StudyError(f"study file {p}: field <file>: not found")
-    try:
-        d = tomllib.loads(p.read_text(encoding="utf-8"))
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise StudyError(f"study file {p}: field <toml>: not valid TOML ({exc})") from None
-    return study_from_dict(d, str(p))
+    return study_from_dict(read_toml(path, "study file", StudyError), str(Path(path)))
 
 
 def cell_estimate(spec: StudySpec, cell: dict[str, Any]) -> tuple[str, ...]:

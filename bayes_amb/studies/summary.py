@@ -12,7 +12,7 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec, cell_estimate
 
@@ -163,9 +163,6 @@ def finalise(spec: StudySpec, rows: list[dict[str, Any]], out_dir: str | Path,
 
 
 def _write_netcdf(path: Path, rows: list[dict[str, Any]]) -> None:
-    import os
-    import tempfile
-
     import xarray as xr
 
     keys = [k for k in rows[0] if k != "traceback"] if rows else []
@@ -178,12 +175,4 @@ def _write_netcdf(path: Path, rows: list[dict[str, Any]]) -> None:
                                               for v in vals]))
         else:
             data[k] = ("replicate", np.array(["" if v is None else str(v) for v in vals]))
-    ds = xr.Dataset(data)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
-        ds.to_netcdf(tmp, engine="h5netcdf")
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_netcdf_atomic(xr.Dataset(data), path)
