@@ -3,11 +3,16 @@
 Results are appended to DIR/results.jsonl one line per finished replicate (O_APPEND, flushed
 and fsync'd), so killing a study loses at most the replicates in flight; starting it again
 skips every replicate already recorded. The final tables are rebuilt from that file.
+
+With ``workers > 1`` the pool starts its processes with forkserver (and Dask with spawn), so
+a script that calls :func:`run_study` must guard its top level with
+``if __name__ == "__main__":``, as the multiprocessing documentation requires.
 """
 
 from __future__ import annotations
 
 import json
+import multiprocessing
 import os
 import sys
 from collections.abc import Iterable, Iterator
@@ -32,6 +37,17 @@ def read_rows(path: Path) -> list[dict[str, Any]]:
         except json.JSONDecodeError:
             continue
     return rows
+
+
+def drop_torn_tail(path: Path) -> None:
+    """Cut a last line that lacks its newline (killed mid-write), so that the next append
+    starts a line of its own instead of being glued to the fragment and lost with it."""
+    if not path.is_file():
+        return
+    data = path.read_bytes()
+    if data and not data.endswith(b"\n"):
+        with path.open("r+b") as fh:
+            fh.truncate(data.rfind(b"\n") + 1)
 
 
 def append_row(path: Path, row: dict[str, Any]) -> None:
@@ -62,7 +78,10 @@ def _pool_results(spec: StudySpec, todo: list[tuple[int, int]], workers: int
         for c, r in todo:
             yield run_replicate(spec, c, r)
         return
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    # forkserver, not fork: the parent may already run threads (tqdm's monitor, scipy's FFT
+    # pool), and forking a threaded process can deadlock the child
+    with ProcessPoolExecutor(max_workers=workers,
+                             mp_context=multiprocessing.get_context("forkserver")) as pool:
         futures = [pool.submit(run_replicate, spec, c, r) for c, r in todo]
         for fut in as_completed(futures):
             yield fut.result()
@@ -70,7 +89,8 @@ def _pool_results(spec: StudySpec, todo: list[tuple[int, int]], workers: int
 
 def _dask_results(spec: StudySpec, todo: list[tuple[int, int]], scheduler: str | None,
                   n_local: int | None) -> Iterator[dict[str, Any]]:
-    from dask.distributed import Client, LocalCluster, as_completed as dask_completed
+    from dask.distributed import Client, LocalCluster
+    from dask.distributed import as_completed as dask_completed
 
     cluster = None
     if scheduler is None:
@@ -112,6 +132,7 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, workers: int = 2,
     write_text_atomic(manifest, json.dumps(study_manifest(spec), indent=2,
                                            default=_jsonable) + "\n")
     results = out / "results.jsonl"
+    drop_torn_tail(results)
     done = {r["id"] for r in read_rows(results)}
     todo = pending(spec, done)
     if dask_local or scheduler:
