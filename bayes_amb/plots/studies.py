@@ -12,6 +12,7 @@ import numpy as np
 from matplotlib.figure import Figure
 
 from bayes_amb.plots.style import save_figure, style_context, styled
+from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec
 from bayes_amb.studies.summary import binomial_band
 
@@ -31,8 +32,8 @@ def _num(v: str) -> float:
 @styled
 def plot_factor(summary: list[dict[str, str]], factor: str, param: str) -> Figure:
     """Bias (+- RMSE) and mean 90 % interval width of one parameter against one factor,
-    averaged over the other factors; coverage with its 95 % interval on the right axis."""
-    fig = Figure(figsize=(6.4, 4.2), layout="constrained")
+    averaged over the other factors; below, coverage with its 95 % interval."""
+    fig = Figure(figsize=(7.6, 4.4), layout="constrained")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     FigureCanvasAgg(fig)
     ax, axc = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
@@ -48,18 +49,18 @@ def plot_factor(summary: list[dict[str, str]], factor: str, param: str) -> Figur
     x = np.array(levels)
     positive = np.all(x > 0)
     xs = x if positive else np.arange(x.size)
-    ax.errorbar(xs, a[:, 0], yerr=a[:, 1], fmt="o-", capsize=3, label="bias +- RMSE")
-    ax.plot(xs, a[:, 2] / 2, "s--", label="half width of 90 % interval")
+    ax.errorbar(xs, a[:, 0], yerr=a[:, 1], fmt="o-", capsize=3, label="bias ± RMSE")
+    ax.plot(xs, a[:, 2] / 2, "s--", label="half width of\n90 % interval")
     ax.axhline(0, color="0.4", lw=0.8)
     ax.set_ylabel(f"{param} (theta)")
-    ax.legend(loc="best")
     ax.set_title(f"{param} against {factor}")
-    axc.fill_between(xs, a[:, 4], a[:, 5], alpha=0.25, label="95 % interval")
-    axc.plot(xs, a[:, 3], "o-", label="coverage of 90 % HDI")
+    axc.fill_between(xs, a[:, 4], a[:, 5], alpha=0.25, label="its 95 % interval")
+    axc.plot(xs, a[:, 3], "o-", label="coverage of\n90 % HDI")
     axc.axhline(0.9, color="C3", lw=0.8, ls=":", label="nominal 0.9")
     axc.set_ylim(-0.05, 1.05)
     axc.set_ylabel("coverage")
-    axc.legend(loc="lower left", ncols=3)
+    for axis in (ax, axc):          # legends beside the axes: the band spans the whole width
+        axis.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
     if positive and x.max() / x.min() > 20:
         ax.set_xscale("log")
     if not positive:
@@ -81,23 +82,30 @@ def plot_sbc_ranks(sbc: dict[str, Any], n_bins: int = 10) -> Figure:
     names = list(sbc)
     cols = min(4, len(names))
     rows = -(-len(names) // cols)
-    fig = Figure(figsize=(2.3 * cols + 0.6, 2.0 * rows + 0.6), layout="constrained")
+    fig = Figure(figsize=(2.3 * cols + 0.6, 2.0 * rows + 0.8), layout="constrained")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     FigureCanvasAgg(fig)
-    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False)).ravel()
-    for ax, n in zip(axes, names):
+    axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False, sharey=True)).ravel()
+    for ax, n in zip(axes, names, strict=False):      # spare axes hidden below
         s = sbc[n]
         hist = np.array(s["rank_hist"])
         m = s["n"]
         lo, hi = binomial_band(m, 1.0 / hist.size)
-        ax.axhspan(lo * m, hi * m, color="0.85", label="99 % band")
-        ax.bar(np.arange(hist.size), hist, width=0.9, color="C0")
-        ax.set_title(f"{n}: p = {s['uniformity_p']:.2f}", fontsize=9)
-        ax.set_xticks([])
-        ax.set_xlabel("rank of truth")
+        ok = s.get("calibrated", True)
+        ax.axhspan(lo * m, hi * m, color="0.88", zorder=0)
+        ax.bar(np.arange(hist.size), hist, width=0.9, color="C0" if ok else "C3", zorder=1)
+        for edge in (lo * m, hi * m):       # band edges stay visible above the bars
+            ax.axhline(edge, color="0.45", lw=0.7, ls="--", zorder=2)
+        ax.axhline(m / hist.size, color="0.2", lw=0.8, zorder=2)
+        ax.set_title(f"{n}: p = {s['uniformity_p']:.2g}" + ("" if ok else ", NOT calibrated"),
+                     fontsize=9, color="black" if ok else "C3")
+        ax.set_xticks([-0.45, hist.size - 0.55], ["0", str(N_RANK_DRAWS)])
     for ax in axes[len(names):]:
         ax.set_visible(False)
-    axes[0].set_ylabel("datasets")
+    for ax in axes[::cols]:
+        ax.set_ylabel("datasets")
+    fig.supxlabel(f"rank of the true value among {N_RANK_DRAWS} posterior draws "
+                  f"({hist.size} bins; line: uniform, dashed: its 99 % band)", fontsize=9)
     fig.suptitle(f"SBC rank histograms ({sbc[names[0]]['n']} datasets)")
     return fig
 
