@@ -23,7 +23,7 @@ $(STAMP): pyproject.toml tools/find-python.sh
 	@touch $(STAMP)
 
 demo: $(STAMP)
-	$(VENV)/bin/bayes-amb model
+	OPENBLAS_NUM_THREADS=1 $(VENV)/bin/bayes-amb demo
 
 test: $(STAMP)
 	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(PY) -m pytest -q

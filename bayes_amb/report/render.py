@@ -1,0 +1,280 @@
+"""Assemble and render a report: the sections of :mod:`bayes_amb.report.sections` in
+reading order behind an executive summary; one Jinja2 template for HTML (self-contained,
+figures as base64 PNG) and PDF (WeasyPrint, figures as SVG), with a matplotlib PdfPages
+fallback when WeasyPrint is unavailable.
+
+    run = collect_run("runs/paper")
+    result = write_report(run, "reports/paper")      # report.html and report.pdf
+"""
+
+from __future__ import annotations
+
+import logging
+import sys
+import textwrap
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from bayes_amb import __version__
+from bayes_amb.io.atomic import atomic_path, write_text_atomic
+from bayes_amb.report import sections as sc
+from bayes_amb.report.collect import ReportError, RunData
+from bayes_amb.report.derived import derive
+from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, gsd
+from bayes_amb.rig import CHANNELS
+
+__all__ = ["PDF_BACKENDS", "ReportResult", "build_sections", "render_html", "summary_section",
+           "write_pdf", "write_report"]
+
+log = logging.getLogger(__name__)
+
+PDF_BACKENDS = ("auto", "weasyprint", "matplotlib")
+
+
+@dataclass
+class ReportResult:
+    """Where the report went, which PDF backend made it, and what it holds."""
+
+    html: Path
+    pdf: Path | None
+    pdf_backend: str | None
+    sections: list[str]
+    n_figures: int
+    wall_s: float
+    notes: list[str] = field(default_factory=list)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"html": str(self.html), "pdf": None if self.pdf is None else str(self.pdf),
+                "pdf_backend": self.pdf_backend, "sections": self.sections,
+                "n_figures": self.n_figures, "wall_s": self.wall_s, "notes": self.notes}
+
+
+def _environment():
+    import jinja2
+
+    return jinja2.Environment(
+        loader=jinja2.PackageLoader("bayes_amb.report", "templates"),
+        autoescape=True, trim_blocks=True, lstrip_blocks=True,
+        undefined=jinja2.StrictUndefined)
+
+
+def render_html(sections: list[Section], meta: dict[str, Any], pdf: bool = False) -> str:
+    """The report as one HTML string (``pdf``: the paginated variant with SVG figures)."""
+    return _environment().get_template("report.html.j2").render(
+        sections=sections, meta=meta, pdf=pdf)
+
+
+class _QuietFonts(logging.Filter):
+    """Drop WeasyPrint's advice to install HarfBuzz-Subset (fonts are embedded anyway)."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return "HarfBuzz" not in record.getMessage()
+
+
+def _weasyprint_pdf(html: str, path: Path) -> None:
+    import weasyprint
+
+    wlog = logging.getLogger("weasyprint")
+    quiet = _QuietFonts()
+    wlog.addFilter(quiet)
+    try:
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message=".*HarfBuzz", category=DeprecationWarning)
+            doc = weasyprint.HTML(string=html, base_url=None)
+            with atomic_path(path) as tmp:
+                doc.write_pdf(str(tmp))
+    finally:
+        wlog.removeFilter(quiet)
+
+
+def _wrap(text: str, width: int = 95) -> list[str]:
+    return textwrap.wrap(text, width) or [""]
+
+
+def _text_lines(section: Section) -> list[str]:
+    lines = [section.title.upper(), ""]
+    for p in section.paragraphs:
+        lines += [*_wrap(p), ""]
+    for b in section.bullets:
+        lines += ["- " + s if i == 0 else "  " + s for i, s in enumerate(_wrap(b, 92))]
+    for t in section.tables:
+        lines += ["", *_wrap(t.caption)]
+        cols = [t.header, *t.rows]
+        widths = [max(len(str(r[k])) for r in cols) for k in range(len(t.header))]
+        for r in cols:
+            lines.append("  ".join(str(v).ljust(w) for v, w in zip(r, widths, strict=True)))
+        if t.note:
+            lines += _wrap(t.note)
+    for f in section.figures:
+        lines += ["", *_wrap(f"Figure (next pages): {f.title}. {f.caption}")]
+    if section.pre:
+        lines += ["", *section.pre.splitlines()]
+    return lines
+
+
+def _matplotlib_pdf(sections: list[Section], meta: dict[str, Any], path: Path) -> None:
+    """Fallback PDF: text pages (monospace) and one page per figure, via PdfPages."""
+    from matplotlib.backends.backend_pdf import PdfPages
+    from matplotlib.figure import Figure
+
+    def text_page(pdf, lines: list[str]) -> None:
+        per_page = 62
+        for i in range(0, max(len(lines), 1), per_page):
+            fig = Figure(figsize=(8.27, 11.69))
+            fig.text(0.06, 0.96, "\n".join(lines[i:i + per_page]), family="monospace",
+                     fontsize=7.0, va="top")
+            pdf.savefig(fig)
+
+    with atomic_path(path) as tmp, PdfPages(tmp) as pdf:
+        head = [meta["title"], meta["subtitle"], "", "Contents:"]
+        head += [f"  {i}. {s.title}" for i, s in enumerate(sections, 1)]
+        text_page(pdf, head)
+        for s in sections:
+            text_page(pdf, _text_lines(s))
+            for f in s.figures:
+                if f.fig is not None:
+                    pdf.savefig(f.fig, bbox_inches="tight")
+                else:
+                    import io
+
+                    import matplotlib.image as mpimg
+                    img = mpimg.imread(io.BytesIO(f.png), format="png")
+                    fig = Figure(figsize=(8.27, 11.69))
+                    ax = fig.add_axes((0.05, 0.1, 0.9, 0.8))
+                    ax.imshow(img)
+                    ax.set_axis_off()
+                    ax.set_title(f"{s.title}: {f.title}", fontsize=9)
+                    pdf.savefig(fig)
+
+
+def write_pdf(sections: list[Section], meta: dict[str, Any], path: Path,
+              backend: str = "auto") -> str:
+    """Write the PDF with WeasyPrint (``auto`` falls back to matplotlib when WeasyPrint or
+    its system libraries cannot be loaded); returns the backend used."""
+    if backend not in PDF_BACKENDS:
+        raise ReportError(f"option --pdf-backend: expected one of {PDF_BACKENDS}, got "
+                          f"{backend!r}")
+    if backend in ("auto", "weasyprint"):
+        try:
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message=".*HarfBuzz",
+                                        category=DeprecationWarning)
+                import weasyprint  # noqa: F401
+        except (ImportError, OSError) as exc:
+            if backend == "weasyprint":
+                raise ReportError(f"option --pdf-backend: WeasyPrint is unavailable ({exc})"
+                                  ) from None
+            log.warning("WeasyPrint unavailable (%s); PDF made with matplotlib instead", exc)
+        else:
+            _weasyprint_pdf(render_html(sections, meta, pdf=True), path)
+            return "weasyprint"
+    _matplotlib_pdf(sections, meta, path)
+    return "matplotlib"
+
+
+def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
+    s, truth = run.summary, run.true_theta()
+    bullets = []
+    for n in run.names:
+        p = s["parameters"][n]
+        lo, hi = p["hdi90"]
+        t = f"; true value {truth[n]:g}" if n in truth else ""
+        sd = p.get("sd")
+        bullets.append(f"{n} = {gsd(p['mean'], sd)} (90 % HDI {gsd(lo, sd)} to "
+                       f"{gsd(hi, sd)}), physical {p['physical']} = "
+                       f"{gsd(p['physical_mean'], p.get('physical_sd'))} {p['unit']}{t}.")
+    bullets += [f"{n}: the posterior presses against the prior bound {b:g}. The data would "
+                "move it further than the prior allows, often a sign that the model misses "
+                "an effect (see Validation)." for n, b in run.prior_bound_hits()]
+    bullets.append("The sampler converged (R-hat ≤ 1.01, ESS ≥ 400, ≥ 50 τ)."
+                   if s.get("converged") else "The sampler did NOT converge: treat the "
+                   "intervals as provisional (see Identification).")
+    bullets += list(s.get("identifiability", {}).get("notes", []))
+    if "snr" in facts:
+        v = [x["snr_db"] for x in facts["snr"]]
+        b = [x["snr_band_db"] for x in facts["snr"]]
+        bullets.append(f"SNR per channel {min(v):.1f} to {max(v):.1f} dB over the whole band, "
+                       f"{min(b):.1f} to {max(b):.1f} dB in the band the likelihood uses.")
+    if "cd" in facts:
+        nom, ide = facts["cd"]["sens"]
+        bullets.append(f"ISO 14839-3 zone {nom.zone} with the nominal plant, {ide.zone} with "
+                       "the identified plant.")
+    if "rt" in facts and min(x["snr_db"] for x in facts["snr"]) <= 120:
+        bad = [ch for ch, e in zip(CHANNELS, facts["rt"].model_error, strict=True) if e]
+        bullets.append("The residual correlates with the excitation on " + ", ".join(bad)
+                       + ": the model misses something the data show (see Validation)."
+                       if bad else "The residual does not correlate with the excitation: "
+                       "no sign of model error at this noise level.")
+    elif "rt" in facts:
+        bullets.append("S(θ̂) x reproduces the data to round-off (noise-free data).")
+    if run.recording_note:
+        bullets.append(f"Note: {run.recording_note}.")
+    return Section("summary", SECTION_TITLES["summary"], bullets=bullets)
+
+
+def build_sections(run: RunData, argv: list[str], opts: ReportOptions,
+                   progress: Callable[[str], None] | None = None
+                   ) -> tuple[list[Section], dict[str, Any]]:
+    """All sections in reading order, and the report's metadata (title, subtitle)."""
+    say = progress or (lambda _msg: None)
+    facts: dict[str, Any] = {}
+    body: list[Section] = []
+    d = None
+    if run.recording is not None:
+        say("model figures")
+        d = derive(run)
+        body.append(sc.model_section(run, d, opts))
+        say("controller: poles, zeros and sensitivities")
+        sec, facts["cd"] = sc.controller_section(run, d, opts)
+        body.append(sec)
+        say("data")
+        sec, facts["snr"] = sc.data_section(run, d)
+        body.append(sec)
+    say("identification figures")
+    body.append(sc.identification_section(run, d, opts))
+    if d is not None:
+        sec, facts["rt"] = sc.validation_section(d, facts["snr"])
+        body.append(sec)
+    if run.diagnosis is not None:
+        body.append(sc.discrepancy_section(run))
+    if run.studies:
+        body.append(sc.studies_section(run))
+    body.append(sc.provenance_section(run, argv))
+    name = Path(str(run.summary["recording"])).stem
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    meta = {"title": f"Identification report: {name}",
+            "subtitle": f"Run folder {run.run_dir}; made {now} by bayes-amb {__version__}",
+            "notes": [run.recording_note] if run.recording_note else []}
+    return [summary_section(run, facts), *body], meta
+
+
+def write_report(run: RunData, out_dir: str | Path, *, argv: list[str] | None = None,
+                 options: ReportOptions | None = None, pdf: bool = True,
+                 pdf_backend: str = "auto",
+                 progress: Callable[[str], None] | None = None) -> ReportResult:
+    """Build every section of ``run`` and write OUT/report.html (and OUT/report.pdf).
+
+    ``argv`` is the command line recorded under "How this was made" (default sys.argv).
+    """
+    t0 = time.perf_counter()
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    opts = options or ReportOptions()
+    sections, meta = build_sections(run, list(sys.argv if argv is None else argv), opts,
+                                    progress)
+    html = render_html(sections, meta)
+    write_text_atomic(out / "report.html", html)
+    backend = None
+    if pdf:
+        if progress:
+            progress("writing the PDF")
+        backend = write_pdf(sections, meta, out / "report.pdf", pdf_backend)
+    n_fig = sum(len(s.figures) for s in sections)
+    return ReportResult(out / "report.html", out / "report.pdf" if pdf else None, backend,
+                        [s.title for s in sections], n_fig, time.perf_counter() - t0,
+                        meta.get("notes", []))

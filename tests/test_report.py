@@ -1,0 +1,210 @@
+"""Reports (bayes_amb.report, ``bayes-amb report``).
+
+One small run (reduced truth, k_By = 0.5, 0.3 s at 1 kHz, sensor noise 1e-8 m, 300 steps x
+12 walkers) is reported once through the CLI, HTML and PDF (WeasyPrint). A copy of the run
+without its recording, with a diagnosis.json and a study folder, checks that sections come
+and go with their inputs, and the matplotlib PDF fallback. Input text is escaped: the
+recording notes and the diagnosis carry HTML.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import io
+import json
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from bayes_amb.cli.main import main
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.io.recording import load_recording, save_recording
+from bayes_amb.report import SECTION_TITLES, ReportOptions, collect_run, render_html, write_pdf
+from bayes_amb.report.derived import Derived, residual_tests
+from bayes_amb.report.render import build_sections
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import SimulationConfig, simulate_recording
+
+pypdf = pytest.importorskip("pypdf")
+pytest.importorskip("jinja2")
+
+NOTES = "bench test <script>alert('x')</script> & co"
+OPTIONAL = ("discrepancy", "studies")
+
+
+def _simulate(ctrl, rig, seed: int, duration: float = 0.3):
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.5}, dt=1e-3, duration=duration,
+                           noise_rms=1e-8, seed=seed)
+    return simulate_recording(rig, ctrl, cfg)
+
+
+@pytest.fixture(scope="module")
+def made(tmp_path_factory):
+    """The run folder, its recording and the report written by the CLI (--json output)."""
+    d = tmp_path_factory.mktemp("report")
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-3), rig)
+    rec, truth = _simulate(ctrl, rig, seed=1)
+    rec = dataclasses.replace(rec, notes=NOTES)
+    csv = save_recording(d / "tiny.csv", rec, truth=truth)[0]
+    other = save_recording(d / "other.csv", _simulate(ctrl, rig, seed=2, duration=0.1)[0])[0]
+    result = identify(load_recording(csv), "k_By", options=IdentifyOptions(steps=300,
+                                                                           walkers=12))
+    run_dir = result.save(d / "run")
+    return {"dir": d, "csv": csv, "other": other, "run": run_dir, "summary": result.summary}
+
+
+@pytest.fixture(scope="module")
+def cli_report(made):
+    """(exit status, --json output, report.html) of ``bayes-amb report RUN --json``."""
+    out = made["dir"] / "out"
+    buf = io.StringIO()
+    with contextlib.redirect_stdout(buf):
+        rc = main(["report", str(made["run"]), "--out", str(out), "--json"])
+    return rc, json.loads(buf.getvalue()), (out / "report.html").read_text(encoding="utf-8")
+
+
+@pytest.fixture(scope="module")
+def bare(made, tmp_path_factory):
+    """A copy of the run where the recording cannot be found, with a diagnosis and a study."""
+    d = tmp_path_factory.mktemp("bare") / "elsewhere" / "run"
+    shutil.copytree(made["run"], d)
+    summary = json.loads((d / "summary.json").read_text())
+    summary["recording"] = "nowhere/missing.csv"
+    (d / "summary.json").write_text(json.dumps(summary))
+    (d / "diagnosis.json").write_text(json.dumps(
+        {"verdict": "actuator lag <b>suspected</b>", "effect": "actuator_lag", "score": 3.2}))
+    study = d.parent / "study"
+    (study / "figures").mkdir(parents=True)
+    from matplotlib.figure import Figure
+    fig = Figure(figsize=(2, 2))
+    fig.add_subplot().plot([0, 1], [1, 0])
+    fig.savefig(study / "figures" / "noise_rms_k_By.png")
+    (study / "study.json").write_text(json.dumps(
+        {"study": {"name": "noise", "description": "noise study", "seed": 11},
+         "n_rows": 4, "conclusions": ["k_By is identified within 5 % at every noise_rms."]}))
+    run = collect_run(d, studies=[study])
+    sections, meta = build_sections(run, ["bayes-amb", "report", str(d)],
+                                    ReportOptions(sensitivity_points=40, campbell_speeds=3))
+    return run, sections, meta, render_html(sections, meta)
+
+
+def _h2(html: str) -> list[str]:
+    return [re.sub(r"^\d+\.\s*", "", h) for h in re.findall(r"<h2[^>]*>(.*?)</h2>", html)]
+
+
+def test_cli_json_and_files(made, cli_report):
+    rc, printed, _ = cli_report
+    assert rc == 0
+    assert printed["pdf_backend"] == "weasyprint"
+    assert printed["n_figures"] >= 15
+    assert printed["sections"] == [SECTION_TITLES[k] for k in SECTION_TITLES
+                                   if k not in OPTIONAL]
+
+
+def test_pdf_opens_with_pages_and_figures(made, cli_report):
+    reader = pypdf.PdfReader(made["dir"] / "out" / "report.pdf")
+    assert len(reader.pages) > 5
+    text = "".join(p.extract_text() for p in reader.pages)
+    for title in (SECTION_TITLES[k] for k in SECTION_TITLES if k not in OPTIONAL):
+        assert title in text
+    n_images = sum(len(p.images) for p in reader.pages)     # rasterised artists
+    paths = sum(p.get_contents().get_data().count(b" l\n") for p in reader.pages
+                if p.get_contents() is not None)             # vector line segments
+    assert n_images >= 1 and paths > 1000
+
+
+def test_html_self_contained(cli_report):
+    html = cli_report[2]
+    for bad in ("http://", "https://", 'src="//', "<link", "@import", "url("):
+        assert bad not in html, bad
+    srcs = re.findall(r'src="([^"]*)"', html)
+    assert len(srcs) >= 15 and all(s.startswith("data:image/png;base64,") for s in srcs)
+    assert 'name="viewport"' in html and "@media (max-width" in html     # phone layout
+
+
+def test_sections_present_and_absent(cli_report):
+    heads = _h2(cli_report[2])
+    assert heads[0] == "Contents"
+    assert heads[1:] == [SECTION_TITLES[k] for k in SECTION_TITLES if k not in OPTIONAL]
+    toc = re.search(r'<nav class="toc".*?</nav>', cli_report[2], re.S).group(0)
+    assert all(f'href="#{k}"' in toc for k in SECTION_TITLES if k not in OPTIONAL)
+
+
+def test_input_text_is_escaped(cli_report):
+    html = cli_report[2]
+    assert "<script" not in html
+    assert "&lt;script&gt;alert(&#39;x&#39;)&lt;/script&gt; &amp; co" in html
+
+
+def test_numbers_come_from_the_run(made, cli_report):
+    """The estimate table shows summary.json's mean and HDI, and the truth (0.5)."""
+    html = cli_report[2]
+    p = made["summary"]["parameters"]["k_By"]
+    row = re.search(r"<td[^>]*>k_By</td>(.*?)</tr>", html, re.S).group(1)
+    cells = re.findall(r"<td[^>]*>(.*?)</td>", row)
+    mean = float(cells[1].split("±")[0])
+    assert mean == pytest.approx(p["mean"], abs=5 * p["sd"])
+    assert float(cells[-1].split(" (")[0]) == 0.5            # true value, simulated
+    assert "bayes-amb report" in html and made["summary"]["recording"] in html
+    from bayes_amb.report.collect import sha256_file
+    assert sha256_file(made["csv"]) in html
+
+
+def test_optional_sections_when_inputs_present(bare):
+    run, _, _, html = bare
+    heads = _h2(html)
+    assert SECTION_TITLES["discrepancy"] in heads and SECTION_TITLES["studies"] in heads
+    for k in ("model", "controller", "data", "validation"):   # need the recording
+        assert SECTION_TITLES[k] not in heads
+    assert "actuator lag &lt;b&gt;suspected&lt;/b&gt;" in html and "<b>" not in html
+    assert "k_By is identified within 5 % at every noise_rms." in html
+    assert "was not found (give it with --recording)" in html
+    assert run.recording is None and run.diagnosis is not None
+
+
+def test_matplotlib_pdf_fallback(bare, tmp_path):
+    _, sections, meta, _ = bare
+    path = tmp_path / "fallback.pdf"
+    assert write_pdf(sections, meta, path, backend="matplotlib") == "matplotlib"
+    reader = pypdf.PdfReader(path)
+    assert len(reader.pages) > 3
+    assert "Identification" in "".join(p.extract_text() for p in reader.pages)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["missing_dir"], "run folder"),
+    (["{run}", "--recording", "{other}"], "not the recording"),
+    (["{run}", "--study", "{run}"], "study manifest"),
+])
+def test_cli_user_errors_one_line(made, capsys, args, message):
+    argv = ["report", *(a.format(run=made["run"], other=made["other"]) for a in args),
+            "--out", str(made["dir"] / "err")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_residual_tests_detect_model_error():
+    """Independent white residual: no model error indicated (per-channel false alarm
+    below 1 % by construction); a residual holding 0.3 x filtered x: indicated on every
+    channel (z of about 0.3 sqrt(4000) = 19 against a limit near 3.9)."""
+    rng = np.random.default_rng(5)
+    n = 4000
+    x = np.sign(rng.standard_normal((n, 4)))
+    noise = rng.standard_normal((n, 4))
+
+    def mk(r):
+        return Derived(forward=None, full=None, theta=np.zeros(1), t=np.arange(n) * 1e-3,
+                       x=x, eps=r, signal=np.zeros_like(r), residual=r)
+
+    clean = residual_tests(mk(noise))
+    assert not clean.model_error.any()
+    lagged = np.roll(x, 2, axis=0)
+    bad = residual_tests(mk(noise + 0.3 * lagged))
+    assert bad.model_error.all()
+    assert np.all(bad.z_cross > 10)
