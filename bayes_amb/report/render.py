@@ -187,7 +187,8 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
         sd = p.get("sd")
         bullets.append(f"{n} = {gsd(p['mean'], sd)} (90 % HDI {gsd(lo, sd)} to "
                        f"{gsd(hi, sd)}), physical {p['physical']} = "
-                       f"{gsd(p['physical_mean'], p.get('physical_sd'))} {p['unit']}{t}.")
+                       f"{gsd(p['physical_mean'], p.get('physical_sd'))}\u00a0"
+                       f"{p['unit'].replace('/', '/\u2060')}{t}.")
     bullets += [f"{n}: the posterior presses against the prior bound {b:g}. The data would "
                 "move it further than the prior allows, often a sign that the model misses "
                 "an effect (see Validation)." for n, b in run.prior_bound_hits()]
