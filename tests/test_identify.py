@@ -1,0 +1,284 @@
+"""End-to-end identification (bayes_amb.inference.identify) and ``bayes-amb identify``.
+
+References and tolerances, test by test:
+
+* Target 1, the paper's case (seed paper, simulated k_By = 0.5 on the reduced model at
+  dt = 1e-3 s, 0.5 s, random binary eta, no noise; the paper reports 0.502): MAP and
+  posterior mean within 0.005 of 0.5; 0.5 inside the 90 % HDI; the two MAP methods
+  (L-BFGS-B and the paper's Nelder-Mead) agree to 1e-5 (noise-free data: eps = S(0.5) x
+  exactly, so both converge to the same point within their stopping tolerances, 1e-7).
+* Several parameters with noise (3 parameters, noise 1e-7 m, r2 0.02 A, 1 s): if the
+  posterior is calibrated each 90 % HDI covers its true value with probability 0.9, so at
+  least 2 of 3 do with probability 0.972 (independent parameters, as here: |rho| < 0.1); and
+  each posterior mean is within 4 posterior sd (a miss has probability 6e-5 per parameter).
+* Decentralised PID (general loop path, x = Vt_K r2): MAP within 0.01 of 0.4 on low-noise
+  data.
+* Identifiability: with an excitation 50 times smaller than the default the posterior sd of
+  c_Ax stays above half its prior sd (the rule in posterior.identifiability), and the result
+  says so; the well-excited case above has no notes.
+* Truth deletion: the sidecar's ``truth`` is never read, so deleting it changes nothing
+  (bitwise).
+* MAP with an r1 disturbance: the MAP's log posterior is not below the log posterior at the
+  true (theta, sigma) (exact: a maximum is a maximum; xfail, see the reason).
+* CLI: --json output is the summary; user errors give exit status 2 and one stderr line.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+
+import arviz as az
+import numpy as np
+import pytest
+
+from bayes_amb.cli.main import main
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.control.pid import design_decentralised_pid
+from bayes_amb.inference.estimate import LogPosterior
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.inference.priors import PriorSet
+from bayes_amb.io.recording import load_recording, load_truth, save_recording
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import SimulationConfig, simulate_recording
+
+PARAM_KEYS = {"mean", "sd", "hdi90", "ess_bulk", "r_hat", "tau", "unit", "physical_mean",
+              "physical_hdi90"}
+SUMMARY_KEYS = {"parameters", "map", "noise", "converged", "wall_s"}
+GROUPS = {"posterior", "log_likelihood", "sample_stats", "observed_data", "constant_data"}
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return load_rig()
+
+
+@pytest.fixture(scope="module")
+def observer_1ms(rig):
+    return export_controller(reference_controller(rig, 1e-3), rig)
+
+
+def simulate(rig, ctrl, params, **kw):
+    cfg = SimulationConfig(truth="reduced", params=params, dt=ctrl.dt, **kw)
+    return simulate_recording(rig, ctrl, cfg)
+
+
+# ---------------------------------------------------------------- Target 1: the paper
+@pytest.fixture(scope="module")
+def paper(rig, observer_1ms):
+    """`bayes-amb simulate --truth reduced --set k_By=0.5 --dt 1e-3 --duration 0.5`."""
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.5}, duration=0.5)
+    return rec, identify(rec, "k_By", options=IdentifyOptions(seed=0))
+
+
+def test_paper_case_recovers_k_by(paper):
+    _, res = paper
+    s = res.summary["parameters"]["k_By"]
+    assert abs(res.summary["map"]["k_By"] - 0.5) < 0.005
+    assert abs(s["mean"] - 0.5) < 0.005
+    lo, hi = s["hdi90"]
+    assert lo <= 0.5 <= hi
+    assert res.summary["converged"]
+    assert res.summary["fast_path"] and res.summary["excitation_port"] == "eta"
+
+
+def test_paper_case_map_methods_agree(paper):
+    rec, res = paper
+    nm = identify(rec, "k_By", options=IdentifyOptions(map_only=True,
+                                                       map_method="nelder-mead"))
+    assert nm.summary["map_method"] == "nelder-mead"
+    assert res.summary["map_method"] == "lbfgs"
+    assert abs(nm.summary["map"]["k_By"] - 0.5) < 0.005
+    assert nm.summary["map"]["k_By"] == pytest.approx(res.summary["map"]["k_By"], abs=1e-5)
+
+
+# ------------------------------------------------------- several parameters with noise
+TRUTH3 = {"k_By": 0.3, "c_By": -0.2, "k_Ax": 0.1}
+
+
+@pytest.fixture(scope="module")
+def noisy3(rig, observer_1ms, tmp_path_factory):
+    rec, _ = simulate(rig, observer_1ms, TRUTH3, duration=1.0, noise_rms=1e-7, r2_rms=0.02,
+                      seed=5)
+    res = identify(rec, tuple(TRUTH3), options=IdentifyOptions(walkers=16, steps=2000,
+                                                               seed=1))
+    out = res.save(tmp_path_factory.mktemp("noisy3"))
+    return res, out
+
+
+def test_several_parameters_recovered_with_noise(noisy3):
+    res, _ = noisy3
+    covered = 0
+    for name, true in TRUTH3.items():
+        v = res.summary["parameters"][name]
+        lo, hi = v["hdi90"]
+        covered += lo <= true <= hi
+        assert abs(v["mean"] - true) < 4 * v["sd"], (name, v)
+        assert 0 < v["sd"] < 0.1, (name, v)                 # informed, not the prior (0.46)
+    assert covered >= len(TRUTH3) - 1, res.summary["parameters"]
+    idf = res.summary["identifiability"]
+    assert idf["identifiable"] and idf["notes"] == []
+
+
+def test_summary_json_has_the_specified_keys(noisy3):
+    res, out = noisy3
+    s = json.loads((out / "summary.json").read_text())
+    assert SUMMARY_KEYS <= set(s)
+    assert set(s["parameters"]) == set(TRUTH3) == set(s["map"])
+    for name, v in s["parameters"].items():
+        assert PARAM_KEYS <= set(v), name
+        assert len(v["hdi90"]) == 2 and v["hdi90"][0] < v["mean"] < v["hdi90"][1]
+        assert v["physical_hdi90"][0] < v["physical_hdi90"][1]
+        assert math.isfinite(v["ess_bulk"]) and math.isfinite(v["r_hat"]) and v["tau"] > 0
+    assert s["parameters"]["k_By"]["unit"] == "N/m"
+    assert s["parameters"]["c_By"]["unit"] == "N s/m"
+    assert set(s["noise"]["map"]) == {"sigma_noise", "sigma_r1", "sigma_r2"}
+    assert isinstance(s["converged"], bool) and s["wall_s"] > 0
+    # the summary on disk is the one returned
+    assert s["map"] == res.summary["map"]
+
+
+def test_posterior_netcdf_loads_and_loo_runs(noisy3):
+    res, out = noisy3
+    dt = az.from_netcdf(out / "posterior.nc")
+    assert GROUPS <= set(dt.children)
+    post = dt["posterior"]
+    n_walkers, n_draws = res.samples.shape[:2]
+    for name in TRUTH3:
+        assert post[name].shape == (n_walkers, n_draws)
+    ll = dt["log_likelihood"]["eps"]
+    assert ll.shape == (n_walkers, n_draws, res.likelihood.n_bands)
+    loo = az.loo(dt, var_name="eps")
+    assert loo.n_data_points == res.likelihood.n_bands
+    assert np.isfinite(float(loo.elpd))
+    # each leave-one-out predictive density is a weighted mean of p(band | draw), so elpd_loo
+    # cannot exceed the sum over bands of the best draw's term
+    assert float(loo.elpd) <= float(ll.max(("chain", "draw")).sum())
+    # effective number of parameters: positive, and of the order of the 6 sampled
+    # dimensions (3 theta, 3 noise intensities) for this well-specified model
+    assert 0 < float(loo.p) < 12
+    assert float(np.max(loo.pareto_k)) < 0.7                # PSIS reliable for every band
+
+
+# ------------------------------------------------------------------ decentralised PID
+def test_pid_controller_identifies_k_by(rig):
+    pid = export_controller(design_decentralised_pid(rig, 1e-4), rig)
+    assert pid.kind == "generic"
+    rec, _ = simulate(rig, pid, {"k_By": 0.4}, duration=0.2, noise_rms=1e-9)
+    assert list(rec.excitation) == ["r2"]
+    res = identify(rec, "k_By", options=IdentifyOptions(map_only=True))
+    assert not res.summary["fast_path"] and res.summary["excitation_port"] == "r2"
+    assert abs(res.summary["map"]["k_By"] - 0.4) < 0.01
+
+
+# ---------------------------------------------------------------------- identifiability
+def test_unidentifiable_parameter_is_reported(rig, observer_1ms):
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.3}, duration=0.5, amplitude=0.01,
+                      noise_rms=1e-7, r2_rms=0.02, seed=5)
+    res = identify(rec, "k_By,c_Ax", options=IdentifyOptions(walkers=16, steps=1000, seed=2))
+    idf = res.summary["identifiability"]
+    assert idf["identifiable"] is False
+    assert idf["notes"]
+    assert any(n.startswith("c_Ax is not identified") for n in idf["notes"]), idf["notes"]
+    prior_sd = 1.6 / math.sqrt(12)                     # default uniform(-0.8, 0.8)
+    assert res.summary["parameters"]["c_Ax"]["sd"] > 0.5 * prior_sd
+
+
+# ------------------------------------------------------------ MAP with an r1 disturbance
+@pytest.mark.xfail(strict=True, reason=(
+    "estimate.find_map does not find sigma_r1: the noise filters are first evaluated at "
+    "theta = 0, where the r1 -> eps filter is exactly zero (S(0) = 0), and the noise grid of "
+    "_initial_point (estimate.py, lines 176-181) tries sigma_r1 in {1e-11, 1e-8} m only; from "
+    "1e-11 the gradient in log sigma_r1 is ~0, so the MAP stays there (here 1e-11 for a true "
+    "1e-5 m) with a log posterior 48 below the maximum reached from the truth"))
+def test_map_is_not_below_the_truth_with_an_r1_disturbance(rig, observer_1ms):
+    """A MAP maximises the log posterior, so it is at least as high as the log posterior at
+    the true (theta, sigma), under the same plug-in noise filters."""
+    sigma = {"noise_rms": 1e-7, "r1_rms": 1e-5, "r2_rms": 0.02}
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.3, "c_By": 0.0}, duration=0.5, seed=100,
+                      **sigma)
+    res = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True))
+    post = LogPosterior(res.likelihood, PriorSet.build(res.names))
+    at_truth = post(np.array([[0.3, 0.0, *np.log10(list(sigma.values()))]]))[0]
+    assert np.isfinite(at_truth)
+    assert res.map.log_post >= at_truth
+    assert res.summary["noise"]["map"]["sigma_r1"]["value"] > 1e-7
+
+
+# ---------------------------------------------------------------------- truth deletion
+def _comparable(summary: dict) -> dict:
+    return {k: v for k, v in summary.items() if not k.endswith("wall_s")}
+
+
+def test_deleting_truth_changes_no_result(rig, observer_1ms, tmp_path):
+    rec, truth = simulate(rig, observer_1ms, {"k_By": 0.3, "c_By": 0.1}, duration=0.5,
+                          noise_rms=1e-7, r2_rms=0.02, seed=9)
+    csv_path, json_path = save_recording(tmp_path / "rec.csv", rec, truth=truth)
+    assert load_truth(csv_path)["params"] == {"k_By": 0.3, "c_By": 0.1}
+    opts = IdentifyOptions(map_only=True)
+    before = identify(load_recording(csv_path), "k_By,c_By", options=opts).summary
+    side = json.loads(json_path.read_text())
+    del side["truth"]
+    json_path.write_text(json.dumps(side))
+    assert load_truth(csv_path) is None
+    after = identify(load_recording(csv_path), "k_By,c_By", options=opts).summary
+    assert _comparable(after) == _comparable(before)
+
+
+# ----------------------------------------------------------------------------- CLI
+@pytest.fixture(scope="module")
+def cli_recording(rig, observer_1ms, tmp_path_factory):
+    rec, truth = simulate(rig, observer_1ms, {"k_By": 0.5}, duration=0.5, noise_rms=1e-8,
+                          seed=3)
+    csv_path, _ = save_recording(tmp_path_factory.mktemp("cli") / "paper.csv", rec,
+                                 truth=truth)
+    return csv_path
+
+
+def run_cli(argv, capsys):
+    try:
+        code = main(argv)
+    except SystemExit as exc:                          # argparse usage errors
+        code = exc.code
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_cli_identify_json(cli_recording, tmp_path, capsys):
+    out_dir = tmp_path / "run"
+    code, out, err = run_cli(["identify", str(cli_recording), "--params", "k_By", "--out",
+                              str(out_dir), "--json", "--steps", "300", "--walkers", "12",
+                              "--prior", "k_By=uniform(-0.9,0.9)"], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert SUMMARY_KEYS <= set(s)
+    assert PARAM_KEYS <= set(s["parameters"]["k_By"])
+    assert s["priors"]["k_By"] == "uniform(-0.9, 0.9)"
+    assert abs(s["map"]["k_By"] - 0.5) < 0.005
+    assert json.loads((out_dir / "summary.json").read_text()) == s
+    assert (out_dir / "posterior.nc").is_file()
+
+
+@pytest.mark.parametrize(("args", "needle"), [
+    (["--params", "k_Zz"], "k_Zz"),
+    (["--params", "k_By", "--prior", "k_By=normal(0.3)"], "prior"),
+    (["--params", "k_By", "--prior", "k_By=normal(0.3,-1)"], "sigma"),
+    (["--params", "k_By", "--prior", "c_Ax=normal(0,0.3)"], "c_Ax"),
+    (["--params", "k_By", "--steps", "5"], "steps"),
+], ids=["unknown-param", "malformed-prior", "negative-sd", "prior-not-estimated",
+        "too-few-steps"])
+def test_cli_identify_bad_input_exits_2_with_one_line(cli_recording, tmp_path, capsys, args,
+                                                      needle):
+    code, out, err = run_cli(["identify", str(cli_recording), "--out", str(tmp_path / "r"),
+                              "--map-only", *args], capsys)
+    assert code == 2
+    assert out == ""
+    assert err.endswith("\n") and err.count("\n") == 1, err
+    assert needle in err
+
+
+def test_cli_identify_missing_recording_exits_2(tmp_path, capsys):
+    code, out, err = run_cli(["identify", str(tmp_path / "nope.csv"), "--params", "k_By",
+                              "--out", str(tmp_path / "r"), "--map-only"], capsys)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "nope" in err, err

@@ -1,0 +1,250 @@
+"""Simulation-based calibration (SBC) of the identification, small version.
+
+Reference: Talts, Betancourt, Simpson, Vehtari & Gelman (2018), "Validating Bayesian
+inference algorithms with simulation-based calibration". If theta ~ p(theta), y ~ p(y |
+theta) and the sampler draws from p(theta | y), the rank of theta among L independent
+posterior draws is uniform on {0, ..., L}, and every central posterior interval of level a
+covers theta in a fraction a of the datasets.
+
+Setup: reduced truth (the model is right), reference observer controller, dt = 1e-3 s,
+0.5 s records, two parameters (k_By, c_By) drawn from the estimation priors, white sensor
+noise (1e-7 m), r1 (1e-5 m, at the controller input; it reaches eps only through S(theta),
+so it is large enough here to widen the exact posterior by tens of percent) and r2 (0.02 A).
+The noise intensities are fixed across datasets (not drawn from their log-uniform priors)
+and estimated by the sampler: their posterior is narrow (500 samples x 4 channels), so
+p(theta | y) is, to good accuracy, p(theta | y, sigma_true), for which the fixed sigma is an
+exact Bayesian model; the SBC statement holds for theta.
+
+Sampler budget: 16 walkers x 600 steps (about 22 tau, bulk ESS 200-350 per parameter), not
+run to 50 tau: SBC needs 99 roughly independent draws (each walker thinned to one draw per
+tau, then 99 chosen at random from about 300), not converged summaries, and the walkers
+start at the Laplace approximation, so the burn-in (2 tau) is short. Measured wall time of
+the default tests: 215-291 s on 2 cores shared with other jobs (load average 3-4);
+one dataset with both noise models takes 6 s alone, so about 95 s on 2 idle cores. The
+report (coverages, rank counts, p-values, wall time) is printed with ``pytest -s``.
+
+A slow variant (``-m slow``) runs 100 datasets with the loop model and also checks the mean
+rank (bias).
+
+Checks and tolerances:
+(a) coverage of the central 50 % and 90 % intervals, per parameter, inside the central 99 %
+    band of Binomial(n, a) / n (scipy.stats.binom.ppf), n datasets;
+(b) rank uniformity: chi-square over 5 equal bins of {0..99} (expected n/5 each; the
+    approximation is fair for n >= 25), p > 0.01 per parameter.
+With 2 parameters and 2 coverage levels plus 2 rank tests, a calibrated sampler fails (a) or
+(b) by chance with probability below about 6 %; the seeds are fixed, so the outcome is
+reproducible.
+
+Power: the same datasets identified with noise_model="iid" (eps white with one variance,
+the naive likelihood of METHOD.md section 4). In eps the sensor noise is high-pass filtered
+(by Mt) and r2 is shaped by the plant's resonances, so the naive posterior errs in both
+directions: the sandwich variance of its estimator at theta = (0.2, 0), computed from the
+forward model and the loop noise filters, says c_By's posterior variance is about 4 times too
+small and k_By's about 7 times too large. The test asserts that some 90 % coverage falls
+below the 99 % band.
+"""
+
+from __future__ import annotations
+
+import time
+from concurrent.futures import ProcessPoolExecutor
+from dataclasses import dataclass
+from multiprocessing import get_context
+
+import numpy as np
+import pytest
+import scipy.stats as st
+
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.inference.priors import Prior
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import SimulationConfig, simulate_recording
+
+NAMES = ("k_By", "c_By")
+PRIORS = {"k_By": Prior("normal", 0.2, 0.15), "c_By": Prior("normal", 0.0, 0.3)}
+N_DATASETS = 30
+N_RANK = 99                          # L posterior draws per dataset; ranks in 0..99
+N_BINS = 5
+WALKERS = 16
+STEPS = 600
+DT, DURATION = 1e-3, 0.5
+NOISE = {"noise_rms": 1e-7, "r1_rms": 1e-5, "r2_rms": 0.02}
+NOISE_MODELS = ("loop", "iid")
+SEED = 20260
+
+
+@dataclass(frozen=True)
+class DatasetResult:
+    """Per dataset: true theta (p,), rank of each among N_RANK draws, whether the central
+    50 % / 90 % intervals cover it, the posterior sd, and the wall time."""
+
+    theta: np.ndarray
+    rank: np.ndarray
+    cover50: np.ndarray
+    cover90: np.ndarray
+    sd: np.ndarray
+    converged: bool
+    wall_s: float
+
+
+def draw_thetas(n: int, seed: int) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return np.stack([PRIORS[k].sample(rng, n) for k in NAMES], axis=1)
+
+
+def rank_draws(samples: np.ndarray, tau: float, rng: np.random.Generator) -> np.ndarray:
+    """N_RANK roughly independent draws: each walker thinned to one draw per tau (the
+    retained chain is already thinned by tau_min / 2), then N_RANK chosen at random."""
+    step = max(1, round(tau))
+    pool = samples[:, ::step].reshape(-1, samples.shape[-1])
+    if pool.shape[0] < N_RANK:
+        raise RuntimeError(f"only {pool.shape[0]} thinned draws for {N_RANK} ranks")
+    return pool[rng.choice(pool.shape[0], N_RANK, replace=False)]
+
+
+def _posterior_stats(res, theta: np.ndarray, rng: np.random.Generator) -> DatasetResult:
+    p = len(NAMES)
+    thin = int(res.summary["sampler"]["thin"])
+    tau = np.array([res.summary["parameters"][n]["tau"] for n in NAMES])
+    flat = res.samples.reshape(-1, res.samples.shape[-1])[:, :p]
+    draws = rank_draws(res.samples[..., :p], float(tau.max()) / thin, rng)
+    q = np.quantile(flat, [0.05, 0.25, 0.75, 0.95], axis=0)
+    return DatasetResult(theta=theta, rank=np.sum(draws < theta, axis=0),
+                         cover50=(q[1] <= theta) & (theta <= q[2]),
+                         cover90=(q[0] <= theta) & (theta <= q[3]), sd=flat.std(axis=0),
+                         converged=bool(res.summary["converged"]),
+                         wall_s=float(res.summary["wall_s"]))
+
+
+def run_dataset(i: int, theta: np.ndarray, models: tuple[str, ...] = NOISE_MODELS
+                ) -> dict[str, DatasetResult]:
+    """Simulate dataset i at theta; identify it with each noise model; rank theta."""
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, DT), rig)
+    cfg = SimulationConfig(truth="reduced", params=dict(zip(NAMES, theta.tolist(), strict=True)),
+                           dt=DT, duration=DURATION, seed=SEED + i, **NOISE)
+    rec, _ = simulate_recording(rig, ctrl, cfg)
+    out = {}
+    for model in models:
+        res = identify(rec, NAMES, PRIORS, IdentifyOptions(
+            walkers=WALKERS, steps=STEPS, seed=SEED + 1000 + i, noise_model=model))
+        out[model] = _posterior_stats(res, theta, np.random.default_rng(SEED + 2000 + i))
+    return out
+
+
+def run_sbc(n: int = N_DATASETS, models: tuple[str, ...] = NOISE_MODELS
+            ) -> dict[str, list[DatasetResult]]:
+    """All datasets on 2 worker processes; results per noise model, in dataset order."""
+    thetas = draw_thetas(n, SEED)
+    # spawned workers inherit the environment (run with OPENBLAS_NUM_THREADS=1)
+    with ProcessPoolExecutor(max_workers=2, mp_context=get_context("spawn")) as pool:
+        rows = list(pool.map(run_dataset, range(n), thetas, [models] * n))
+    return {m: [r[m] for r in rows] for m in models}
+
+
+@dataclass(frozen=True)
+class SBCStats:
+    n: int
+    cover50: np.ndarray              # fraction per parameter
+    cover90: np.ndarray
+    counts: np.ndarray               # (p, N_BINS) rank histogram
+    p_chi2: np.ndarray
+    mean_rank: np.ndarray            # mean rank / N_RANK per parameter (0.5 if unbiased)
+    band50: tuple[float, float]
+    band90: tuple[float, float]
+
+    @property
+    def mean_rank_z(self) -> np.ndarray:
+        """Mean normalised rank against its null distribution: discrete uniform on
+        {0..L}/L has sd sqrt(((L + 1)^2 - 1) / 12) / L, divided by sqrt(n)."""
+        sd = np.sqrt(((N_RANK + 1) ** 2 - 1) / 12) / N_RANK / np.sqrt(self.n)
+        return (self.mean_rank - 0.5) / sd
+
+    def report(self, label: str) -> str:
+        lines = [f"SBC {label}: n = {self.n}; 99 % bands: 50 % {self.band50}, "
+                 f"90 % {self.band90}"]
+        for j, name in enumerate(NAMES):
+            lines.append(f"  {name}: coverage50 {self.cover50[j]:.3f}, coverage90 "
+                         f"{self.cover90[j]:.3f}, rank counts {self.counts[j].tolist()}, "
+                         f"chi2 p = {self.p_chi2[j]:.3g}, mean rank / L "
+                         f"{self.mean_rank[j]:.3f} (z = {self.mean_rank_z[j]:+.2f})")
+        return "\n".join(lines)
+
+
+def binomial_band(n: int, a: float) -> tuple[float, float]:
+    """Central 99 % band of the covered fraction for n datasets at nominal coverage a."""
+    return (float(st.binom.ppf(0.005, n, a)) / n, float(st.binom.ppf(0.995, n, a)) / n)
+
+
+def sbc_stats(results: list[DatasetResult]) -> SBCStats:
+    n = len(results)
+    ranks = np.array([r.rank for r in results])                      # (n, p)
+    edges = np.linspace(0, N_RANK + 1, N_BINS + 1)
+    counts = np.array([np.histogram(ranks[:, j], bins=edges)[0] for j in range(len(NAMES))])
+    p_chi2 = np.array([st.chisquare(c).pvalue for c in counts])
+    return SBCStats(n=n, cover50=np.mean([r.cover50 for r in results], axis=0),
+                    cover90=np.mean([r.cover90 for r in results], axis=0), counts=counts,
+                    p_chi2=p_chi2, mean_rank=ranks.mean(axis=0) / N_RANK,
+                    band50=binomial_band(n, 0.5), band90=binomial_band(n, 0.9))
+
+
+def test_prior_draws_are_valid_simulation_parameters():
+    """All drawn thetas are accepted by the simulator (|theta| <= 0.95): no rejection, so
+    the datasets do follow the prior."""
+    th = draw_thetas(N_DATASETS, SEED)
+    assert np.all(np.abs(th) <= 0.95)
+
+
+def run_and_report(n: int, models: tuple[str, ...]) -> dict[str, SBCStats]:
+    t0 = time.perf_counter()
+    results = run_sbc(n, models)
+    stats = {m: sbc_stats(r) for m, r in results.items()}
+    wall = time.perf_counter() - t0
+    print(f"\nSBC of {n} datasets, noise models {models}, {WALKERS} walkers x {STEPS} steps:"
+          f" {wall:.0f} s wall on 2 workers")
+    for m, r in results.items():
+        print(stats[m].report(f"noise_model={m}"))
+        print(f"  mean posterior sd {np.round(np.mean([x.sd for x in r], axis=0), 4).tolist()},"
+              f" identify wall per dataset {np.mean([x.wall_s for x in r]):.1f} s")
+    return stats
+
+
+def assert_calibrated(s: SBCStats) -> None:
+    for j, name in enumerate(NAMES):
+        assert s.band50[0] <= s.cover50[j] <= s.band50[1], (name, s.report("loop"))
+        assert s.band90[0] <= s.cover90[j] <= s.band90[1], (name, s.report("loop"))
+        assert s.p_chi2[j] > 0.01, (name, s.report("loop"))
+
+
+@pytest.fixture(scope="module")
+def sbc():
+    return run_and_report(N_DATASETS, NOISE_MODELS)
+
+
+def test_sbc_loop_noise_model_is_calibrated(sbc):
+    assert_calibrated(sbc["loop"])
+
+
+def test_sbc_iid_noise_model_is_miscalibrated(sbc):
+    """Power: the same datasets under the naive white-eps likelihood. Predicted from the
+    sandwich variance of the iid estimator at theta = (0.2, 0): c_By's posterior variance is
+    about 4 times too small (90 % coverage near 0.58), k_By's about 7 times too large."""
+    s = sbc["iid"]
+    assert np.any(s.cover90 < s.band90[0]), s.report("iid")
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "measured (seed 20260, 892 s): k_By mean rank / 99 = 0.584 (z = +2.88), rank counts "
+    "[13, 15, 20, 21, 31]; c_By 0.505 (z = +0.18); coverages inside the bands. Suspected "
+    "cause: find_map leaves sigma_r1 at 1e-11 m (see test_identify::"
+    "test_map_is_not_below_the_truth_with_an_r1_disturbance), so the r1 part of eps is "
+    "modelled with the wrong spectrum"))
+def test_sbc_loop_noise_model_is_calibrated_100_datasets():
+    """The default test with 100 datasets (loop model only): the same checks, and the mean
+    normalised rank within its 99 % band (|z| < 2.576), which detects a posterior shifted by
+    about 0.3 sd on average."""
+    s = run_and_report(100, ("loop",))["loop"]
+    assert_calibrated(s)
+    assert np.all(np.abs(s.mean_rank_z) < st.norm.ppf(0.995)), s.report("loop")
