@@ -207,9 +207,6 @@ def test_log_likelihood_is_minus_inf_for_non_finite_input_row_by_row(noisy_like)
     assert ll[0] == pytest.approx(ref, rel=1e-12) and ll[5] == pytest.approx(ref, rel=1e-12)
 
 
-@pytest.mark.xfail(strict=True, reason="whittle._logdet_and_trace: one Phi that is not "
-                   "positive definite makes np.linalg.cholesky raise for the whole stack, and "
-                   "the except branch flags every row of the batch (whittle.py lines 96-98)")
 def test_a_singular_noise_spectrum_row_does_not_spoil_the_batch(noisy_like):
     """sigma = 10^-300 underflows to Phi = 0 (outside the prior, so only direct calls reach
     it): that row is -inf, the valid row keeps its value."""

@@ -19,7 +19,7 @@ References and tolerances, test by test:
 * Truth deletion: the sidecar's ``truth`` is never read, so deleting it changes nothing
   (bitwise).
 * MAP with an r1 disturbance: the MAP's log posterior is not below the log posterior at the
-  true (theta, sigma) (exact: a maximum is a maximum; xfail, see the reason).
+  true (theta, sigma) (exact: a maximum is a maximum).
 * CLI: --json output is the summary; user errors give exit status 2 and one stderr line.
 """
 
@@ -185,12 +185,6 @@ def test_unidentifiable_parameter_is_reported(rig, observer_1ms):
 
 
 # ------------------------------------------------------------ MAP with an r1 disturbance
-@pytest.mark.xfail(strict=True, reason=(
-    "estimate.find_map does not find sigma_r1: the noise filters are first evaluated at "
-    "theta = 0, where the r1 -> eps filter is exactly zero (S(0) = 0), and the noise grid of "
-    "_initial_point (estimate.py, lines 176-181) tries sigma_r1 in {1e-11, 1e-8} m only; from "
-    "1e-11 the gradient in log sigma_r1 is ~0, so the MAP stays there (here 1e-11 for a true "
-    "1e-5 m) with a log posterior 48 below the maximum reached from the truth"))
 def test_map_is_not_below_the_truth_with_an_r1_disturbance(rig, observer_1ms):
     """A MAP maximises the log posterior, so it is at least as high as the log posterior at
     the true (theta, sigma), under the same plug-in noise filters."""

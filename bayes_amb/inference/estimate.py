@@ -175,7 +175,7 @@ def least_squares_theta(post: LogPosterior, method: str, theta0: NDArray) -> NDA
 
 def _initial_point(post: LogPosterior, theta0: NDArray) -> NDArray:
     """Noise intensities on a coarse grid at theta0 (their MAP follows in the full search)."""
-    grid = np.array([[a, b, c] for a in (-11, -9, -7, -5) for b in (-11, -8)
+    grid = np.array([[a, b, c] for a in (-11, -9, -7, -5) for b in (-11, -8, -6, -4)
                      for c in (-7, -5, -3, -1)], dtype=float)
     v = post(np.hstack([np.tile(theta0, (grid.shape[0], 1)), grid]))
     return np.concatenate([theta0, grid[int(np.argmax(v))]])
@@ -213,7 +213,14 @@ def _starts(post: LogPosterior, theta_ls: NDArray, n_random: int, seed: int) -> 
     thetas = [theta_ls, _theta_start(post)]
     for _ in range(n_random):
         thetas.append(np.array([pr.sample(rng, 1)[0] for pr in post.priors.priors]))
-    return [_initial_point(post, th) for th in thetas]
+    starts = [_initial_point(post, th) for th in thetas]
+    # sigma_r1 reaches eps only through S(theta) Ut: from its lower bound the gradient is
+    # ~0, so also start the eq. 15 estimate with r1 switched on at two levels
+    for level in (-6.0, -4.0):
+        alt = starts[0].copy()
+        alt[post.p + 1] = level
+        starts.append(alt)
+    return starts
 
 
 def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = None,
@@ -232,6 +239,9 @@ def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = Non
     n0 = post.n_evals
     if x0 is None:
         theta_ls = least_squares_theta(post, method, _theta_start(post))
+        # noise filters at the eq. 15 estimate: at theta = 0 the r1 filter S Ut is zero, so
+        # sigma_r1 would be invisible to the start and stuck wherever it began
+        post.likelihood.set_noise_reference(theta_ls)
         starts = _starts(post, theta_ls, n_random_starts, seed)
         short = [_local_search(post, method, s, maxiter=40)[0] for s in starts]
         vals = post(np.array(short))
@@ -239,7 +249,13 @@ def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = Non
     else:
         x = np.asarray(x0, dtype=float)
     success = True
-    for _round in range(2 if refresh_noise else 1):
+    for rnd in range(2 if refresh_noise else 1):
+        if rnd > 0:
+            # re-seed the noise intensities on the grid at the current theta (a sigma
+            # stuck at a bound has no gradient to leave it by), keep the better point
+            alt = _initial_point(post, x[:post.p])
+            if post(alt[None])[0] > post(x[None])[0]:
+                x = alt
         x, success = _local_search(post, method, x)
         if refresh_noise:
             post.likelihood.set_noise_reference(x[:post.p])

@@ -94,8 +94,13 @@ def _logdet_and_trace(Phi: NDArray, P: NDArray) -> tuple[NDArray, NDArray, NDArr
     try:
         L = np.linalg.cholesky(Phi)
     except np.linalg.LinAlgError:
-        bad = np.zeros(Phi.shape[:-2], dtype=bool)
-        return np.zeros(Phi.shape[:-2]), np.zeros(Phi.shape[:-2]), bad
+        if Phi.ndim <= 3:
+            bad = np.zeros(Phi.shape[:-2], dtype=bool)
+            return np.zeros(Phi.shape[:-2]), np.zeros(Phi.shape[:-2]), bad
+        # one row of the batch is not positive definite: do the rows one by one so the
+        # others keep their values
+        parts = [_logdet_and_trace(Phi[i], P[i]) for i in range(Phi.shape[0])]
+        return tuple(np.stack([q[j] for q in parts]) for j in range(3))  # type: ignore
     n = L.shape[-1]
     d = np.real(np.diagonal(L, axis1=-2, axis2=-1))
     ok = np.all(d > 0, axis=-1)
