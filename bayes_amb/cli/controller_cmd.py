@@ -8,10 +8,10 @@ import numpy as np
 
 from bayes_amb.cli.common import emit
 from bayes_amb.control.coprime import bezout_residual, coprime_factors
+from bayes_amb.control.discrete import spectral_radius, zoh
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.robustness import full_plant_discrete, loop_spectral_radius, sensitivity
 from bayes_amb.control.youla import s_theta_exact
-from bayes_amb.control.discrete import spectral_radius, zoh
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rig import load_rig
 from bayes_amb.rotor import full_model

@@ -4,8 +4,6 @@ from __future__ import annotations
 
 import argparse
 
-import numpy as np
-
 from bayes_amb.cli.common import emit
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.reduction.fidelity import singular_value_data

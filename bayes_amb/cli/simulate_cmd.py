@@ -78,7 +78,7 @@ def run(args: argparse.Namespace) -> int:
     rms_y = np.sqrt(np.mean(np.asarray(rec.y) ** 2, axis=0))
     d = {"csv": str(csv_path), "json": str(json_path), "samples": rec.n_samples,
          "dt": rec.dt, "speed_rpm": rec.speed_rpm, "truth": args.truth,
-         "y_rms_m": dict(zip(("Ax", "Ay", "Bx", "By"), rms_y.tolist()))}
+         "y_rms_m": dict(zip(("Ax", "Ay", "Bx", "By"), rms_y.tolist(), strict=True))}
     text = (f"wrote {csv_path} and {json_path}: {rec.n_samples} samples at dt = {rec.dt:g} s, "
             f"{rec.speed_rpm:.0f} rpm, {args.truth} truth; y RMS "
             + ", ".join(f"{k} {v * 1e6:.2f} um" for k, v in d["y_rms_m"].items()))

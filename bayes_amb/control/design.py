@@ -80,7 +80,7 @@ class ObserverController:
 
         This is the exported controller: u = F xhat + eta, eps = y - C xhat.
         """
-        n, m = self.B.shape
+        _n, m = self.B.shape
         p = self.C.shape[0]
         Ak = self.A + self.B @ self.F + self.L @ self.C
         Bk = np.hstack([-self.L, self.B])

@@ -63,7 +63,8 @@ def sensitivity(Ap: NDArray, Bp: NDArray, Cp: NDArray, K: tuple[NDArray, ...], d
     mag = np.abs(np.diagonal(S, axis1=1, axis2=2))
     peaks = mag.max(axis=0)
     return SensitivityData(freq_hz=w / (2 * np.pi), magnitude=mag,
-                           peak_db={ch: float(20 * np.log10(p)) for ch, p in zip(CHANNELS, peaks)},
+                           peak_db={ch: float(20 * np.log10(p))
+                                    for ch, p in zip(CHANNELS, peaks, strict=True)},
                            zone=iso14839_zone(float(peaks.max())))
 
 

@@ -140,7 +140,8 @@ def _theta_start(post: LogPosterior) -> NDArray:
     return np.array([np.exp(pr.a) if pr.kind == "lognormal" else
                      float(np.clip(0.0, lo if lo is not None else -np.inf,
                                    hi if hi is not None else np.inf))
-                     for pr, (lo, hi) in zip(post.priors.priors, post.bounds()[:post.p])])
+                     for pr, (lo, hi) in zip(post.priors.priors, post.bounds()[:post.p],
+                                             strict=True)])
 
 
 def least_squares_theta(post: LogPosterior, method: str, theta0: NDArray) -> NDArray:

@@ -130,12 +130,13 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         "recording": recording.source,
         "parameters_estimated": list(names),
         "priors": prior_set.to_dict(),
-        "map": {n: float(v) for n, v in zip(names, m.theta)},
+        "map": {n: float(v) for n, v in zip(names, m.theta, strict=True)},
         "map_method": m.method,
         "map_wall_s": m.wall_s,
         "noise": {"model": NOISE_MODEL,
                   "map": {s: {"value": float(10 ** v), "unit": u}
-                          for s, v, u in zip(NOISE_SOURCES, m.log10_sigma, NOISE_UNITS)}},
+                          for s, v, u in zip(NOISE_SOURCES, m.log10_sigma, NOISE_UNITS,
+                                             strict=True)}},
         "fast_path": forward.fast,
         "excitation_port": forward.port,
         "n_bands": like.n_bands,
@@ -165,7 +166,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
                      attrs)
     params_summary = summarise(dt, names, run.tau, recording.rig)
     noise_post = {}
-    for j, (s, u) in enumerate(zip(NOISE_SOURCES, NOISE_UNITS)):
+    for j, (s, u) in enumerate(zip(NOISE_SOURCES, NOISE_UNITS, strict=True)):
         v = 10.0 ** run.samples[:, :, post.p + j].ravel()
         noise_post[s] = {"mean": float(v.mean()), "q05": float(np.quantile(v, 0.05)),
                          "q95": float(np.quantile(v, 0.95)), "unit": u,

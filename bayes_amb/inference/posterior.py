@@ -12,8 +12,8 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bayes_amb.inference.priors import PriorSet
-from bayes_amb.io.atomic import write_netcdf_atomic
 from bayes_amb.inference.whittle import NOISE_SOURCES, WhittleLikelihood
+from bayes_amb.io.atomic import write_netcdf_atomic
 from bayes_amb.rig import Rig
 from bayes_amb.uncertainty import get_spec
 

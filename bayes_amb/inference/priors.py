@@ -162,7 +162,7 @@ class PriorSet:
         return lp
 
     def to_dict(self) -> dict[str, str]:
-        d = {n: str(p) for n, p in zip(self.names, self.priors)}
+        d = {n: str(p) for n, p in zip(self.names, self.priors, strict=True)}
         d.update({k: f"log10-uniform({lo:g}, {hi:g})" for k, (lo, hi) in
                   NOISE_LOG10_BOUNDS.items()})
         return d

@@ -71,7 +71,7 @@ def initial_ball(post: LogPosterior, center: NDArray, cov: NDArray | None, n_wal
 def _retained(sampler: emcee.EnsembleSampler, tau: NDArray, p: int) -> NDArray:
     tau_max = float(np.max(tau[:p])) if p else float(np.max(tau))
     total = sampler.iteration
-    burn = min(int(math.ceil(2 * tau_max)), total // 2)
+    burn = min(math.ceil(2 * tau_max), total // 2)
     thin = max(1, int(np.min(tau[:p]) / 2)) if p else 1
     return np.swapaxes(sampler.get_chain(discard=burn, thin=thin), 0, 1)
 
@@ -119,7 +119,7 @@ def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
                 break
         tau_prev = tau
     tau_max = float(np.max(tau[:post.p])) if post.p else float(np.max(tau))
-    burn = min(int(math.ceil(2 * tau_max)), total // 2)
+    burn = min(math.ceil(2 * tau_max), total // 2)
     thin = max(1, int(np.min(tau[:post.p]) / 2)) if post.p else 1
     samples = np.swapaxes(sampler.get_chain(discard=burn, thin=thin), 0, 1)
     lp = np.swapaxes(sampler.get_log_prob(discard=burn, thin=thin), 0, 1)

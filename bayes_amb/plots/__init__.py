@@ -8,5 +8,5 @@ from bayes_amb.plots.model import (
 )
 from bayes_amb.plots.style import FigureError, save_figure, style_context, styled
 
-__all__ = ["FigureError", "fidelity_figure", "plot_campbell", "plot_rotor_sketch", "plot_singular_values",
-           "save_figure", "style_context", "styled"]
+__all__ = ["FigureError", "fidelity_figure", "plot_campbell", "plot_rotor_sketch",
+           "plot_singular_values", "save_figure", "style_context", "styled"]

@@ -92,7 +92,7 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
     if not 0 <= speed <= 2 * rig.nominal_speed_rpm:
         raise BayesAmbError(f"option --speed-rpm: value {speed} out of range 0.."
                             f"{2 * rig.nominal_speed_rpm:g}")
-    n = int(round(config.duration / config.dt))
+    n = round(config.duration / config.dt)
     streams = np.random.default_rng(config.seed).spawn(4)
     exc = excitation(config.excitation, n, 4, config.amplitude, streams[0], config.dt)
     noise = gaussian_noise(n, 4, config.noise_rms, streams[1], config.dt)

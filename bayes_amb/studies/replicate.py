@@ -93,7 +93,7 @@ def run_replicate(spec: StudySpec, cell_index: int, rep: int) -> dict[str, Any]:
             row[f"{n}_q"] = row.pop("_q")
             row[f"{n}_rank"] = row.pop("_rank")
         row["error"] = ""
-    except Exception as exc:   # noqa: BLE001 - a failed replicate is data, not a crash
+    except Exception as exc:
         row["converged"] = False
         row["error"] = f"{type(exc).__name__}: {exc}"
         row["traceback"] = traceback.format_exc(limit=3)
@@ -112,5 +112,5 @@ def _rank_stats(res: Any, j: int, true: float, v: dict[str, Any]) -> dict[str, A
         from scipy.stats import norm
         sd = v["sd"] if v["sd"] and np.isfinite(v["sd"]) and v["sd"] > 0 else np.inf
         q = float(norm.cdf((true - v["mean"]) / sd))
-        rank = int(round(q * N_RANK_DRAWS))
+        rank = round(q * N_RANK_DRAWS)
     return {"_q": q, "_rank": rank}

@@ -42,9 +42,9 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.tomlfile import read_toml
 from bayes_amb.inference.priors import parse_prior
 from bayes_amb.simulate import SimulationConfig, parse_effect
+from bayes_amb.tomlfile import read_toml
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
 
@@ -184,7 +184,8 @@ def study_from_dict(d: dict[str, Any], source: str = "<dict>") -> StudySpec:
                      steps=es.get("steps"), walkers=es.get("walkers"),
                      factors={k: list(v) for k, v in factors.items()}, source=source)
     keys = list(spec.factors)
-    cells = [dict(zip(keys, combo)) for combo in itertools.product(*spec.factors.values())]
+    cells = [dict(zip(keys, combo, strict=True))
+             for combo in itertools.product(*spec.factors.values())]
     object.__setattr__(spec, "cells", cells or [{}])
     for i, c in enumerate(spec.cells):          # every cell must make a valid simulation
         try:
