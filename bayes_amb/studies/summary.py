@@ -107,6 +107,16 @@ def _fmt(v: Any) -> str:
     return str(v)
 
 
+def _pinned(r: dict[str, Any]) -> bool:
+    """RMSE within 5 % of the true value (0.1 floor) and 90 % coverage plausible."""
+    return bool(np.isfinite(r["rmse"]) and r["rmse"] <= 0.05 * max(abs(r["true_mean"]), 0.1)
+                and r["coverage90_hi"] >= 0.8)
+
+
+def _sort_key(v: Any) -> tuple[int, Any]:
+    return (0, float(v)) if isinstance(v, (int, float)) else (1, str(v))
+
+
 def conclusions(spec: StudySpec, summary: list[dict[str, Any]],
                 sbc: dict[str, Any] | None) -> list[str]:
     """One plain-language sentence per parameter and varied factor (plus SBC verdicts)."""
@@ -124,22 +134,28 @@ def conclusions(spec: StudySpec, summary: list[dict[str, Any]],
             rs = [r for r in summary if r["param"] == n]
             if not rs:
                 continue
-            pinned = [r for r in rs if np.isfinite(r["rmse"]) and
-                      r["rmse"] <= 0.05 * max(abs(r["true_mean"]), 0.1) and
-                      r["coverage90_hi"] >= 0.8]
-            vals = [r[f"f_{factor}"] for r in rs]
-            ok_vals = [r[f"f_{factor}"] for r in pinned]
-            if not ok_vals:
-                lines.append(f"{n} is not identified within 5 % at any {factor} in "
-                             f"{[_fmt(v) for v in vals]}.")
-            elif len(ok_vals) == len(vals):
-                lines.append(f"{n} is identified within 5 % (RMSE) with calibrated intervals "
-                             f"at every {factor} tried ({_fmt(min(vals))} to {_fmt(max(vals))}).")
-            else:
-                bad = [v for v in vals if v not in ok_vals]
-                lines.append(f"{n} is identified within 5 % at {factor} = "
-                             f"{', '.join(_fmt(v) for v in ok_vals)}, but not at "
-                             f"{', '.join(_fmt(v) for v in bad)}.")
+            levels = sorted({r[f"f_{factor}"] for r in rs}, key=_sort_key)
+            share = {v: np.mean([_pinned(r) for r in rs if r[f"f_{factor}"] == v])
+                     for v in levels}
+            always = [v for v in levels if share[v] == 1.0]
+            never = [v for v in levels if share[v] == 0.0]
+            some = [v for v in levels if 0.0 < share[v] < 1.0]
+            other = len(rs) // len(levels) > 1
+            scope = " (in every combination of the other factors)" if other else ""
+            if not always and not some:
+                lines.append(f"{n} is not identified within 5 % (RMSE) at any {factor} tried "
+                             f"({', '.join(_fmt(v) for v in levels)}).")
+                continue
+            parts = []
+            if always:
+                parts.append(f"at {factor} = {', '.join(_fmt(v) for v in always)}{scope}")
+            if some:
+                parts.append(f"in some cells at {factor} = {', '.join(_fmt(v) for v in some)}")
+            text = f"{n} is identified within 5 % (RMSE) with calibrated intervals " + \
+                "; ".join(parts)
+            if never:
+                text += f"; not at {', '.join(_fmt(v) for v in never)}"
+            lines.append(text + ".")
     return lines
 
 
