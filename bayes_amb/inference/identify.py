@@ -86,6 +86,12 @@ class IdentificationResult:
         return d
 
 
+def _absolute(source: str) -> str:
+    """The recording's path made absolute when it names a file (reports find it later)."""
+    p = Path(source)
+    return str(p.resolve()) if p.is_file() else source
+
+
 def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | None,
                      rig: Any) -> dict[str, dict[str, Any]]:
     out = {}
@@ -127,7 +133,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     summary: dict[str, Any] = {
         "format": "bayes-amb-summary/1",
         "package_version": __version__,
-        "recording": recording.source,
+        "recording": _absolute(recording.source),
         "parameters_estimated": list(names),
         "priors": prior_set.to_dict(),
         "map": {n: float(v) for n, v in zip(names, m.theta, strict=True)},
