@@ -14,16 +14,7 @@ import pytest
 from bayes_amb.cli.main import main
 from bayes_amb.rig.rig import CHANNELS
 from bayes_amb.uncertainty import PARAMETERS
-
-
-def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
-    """Exit status, stdout and stderr of main(argv); argparse errors raise SystemExit."""
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
+from tests.helpers import run_cli
 
 
 @pytest.fixture(scope="module")

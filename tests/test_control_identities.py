@@ -11,7 +11,6 @@ from __future__ import annotations
 import control as ct
 import numpy as np
 import pytest
-import scipy.signal as sig
 from scipy.optimize import linear_sum_assignment
 
 from bayes_amb.control import (
@@ -39,6 +38,7 @@ from bayes_amb.control.youla import (
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rig import load_rig
 from bayes_amb.uncertainty import lft_reduced
+from tests.helpers import dlsim, rel_freq, rel_signal
 
 DT = 1e-4
 ALL_KC = "k_Ax,k_Ay,k_Bx,k_By,c_Ax,c_Ay,c_Bx,c_By"
@@ -76,23 +76,6 @@ def factors(ctrl):
 @pytest.fixture(scope="module")
 def z():
     return unit_circle(DT, 400)
-
-
-def rel_freq(a: np.ndarray, b: np.ndarray) -> float:
-    """max over z of ||a(z) - b(z)||_F / ||b(z)||_F."""
-    return float(np.max(np.linalg.norm(a - b, axis=(1, 2)) / np.linalg.norm(b, axis=(1, 2))))
-
-
-def rel_signal(a: np.ndarray, b: np.ndarray) -> float:
-    """Largest per-channel max|a - b| / max|b| (channels carry different units)."""
-    return float(np.max(np.max(np.abs(a - b), axis=0) / np.max(np.abs(b), axis=0)))
-
-
-def dlsim(sys: ct.StateSpace, u: np.ndarray) -> np.ndarray:
-    """scipy.signal.dlsim from rest; u (n, m) -> y (n, p)."""
-    _, y, _ = sig.dlsim((np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C),
-                         np.asarray(sys.D), sys.dt), u)
-    return y
 
 
 # ---------------------------------------------------------------- eq. 3, factors of G and K

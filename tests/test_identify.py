@@ -32,7 +32,6 @@ import arviz as az
 import numpy as np
 import pytest
 
-from bayes_amb.cli.main import main
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.pid import design_decentralised_pid
 from bayes_amb.inference.estimate import LogPosterior
@@ -41,6 +40,7 @@ from bayes_amb.inference.priors import PriorSet
 from bayes_amb.io.recording import load_recording, load_truth, save_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
+from tests.helpers import run_cli
 
 PARAM_KEYS = {"mean", "sd", "hdi90", "ess_bulk", "r_hat", "tau", "unit", "physical_mean",
               "physical_hdi90"}
@@ -227,15 +227,6 @@ def cli_recording(rig, observer_1ms, tmp_path_factory):
     csv_path, _ = save_recording(tmp_path_factory.mktemp("cli") / "paper.csv", rec,
                                  truth=truth)
     return csv_path
-
-
-def run_cli(argv, capsys):
-    try:
-        code = main(argv)
-    except SystemExit as exc:                          # argparse usage errors
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_cli_identify_json(cli_recording, tmp_path, capsys):

@@ -12,7 +12,6 @@ import dataclasses
 
 import numpy as np
 import pytest
-import scipy.signal as sig
 
 from bayes_amb.control import coprime_factors, design_observer_controller, freqresp
 from bayes_amb.control.compatible import (
@@ -41,6 +40,7 @@ from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rig import CHANNELS, load_rig
 from bayes_amb.rotor import full_model
 from bayes_amb.uncertainty import lft_reduced
+from tests.helpers import dlsim, rel_freq, rel_signal
 
 DT = 1e-4
 ALL_KC = "k_Ax,k_Ay,k_Bx,k_By,c_Ax,c_Ay,c_Bx,c_By"
@@ -86,23 +86,6 @@ def factors_K(factors, pid):
 @pytest.fixture(scope="module")
 def z():
     return unit_circle(DT, 400)
-
-
-def rel_freq(a: np.ndarray, b: np.ndarray) -> float:
-    """max over z of ||a(z) - b(z)||_F / ||b(z)||_F."""
-    return float(np.max(np.linalg.norm(a - b, axis=(1, 2)) / np.linalg.norm(b, axis=(1, 2))))
-
-
-def rel_signal(a: np.ndarray, b: np.ndarray) -> float:
-    """Largest per-channel max|a - b| / max|b|."""
-    return float(np.max(np.max(np.abs(a - b), axis=0) / np.max(np.abs(b), axis=0)))
-
-
-def dlsim(sys, u: np.ndarray) -> np.ndarray:
-    """scipy.signal.dlsim from rest, independent of compatible.simulate."""
-    _, y, _ = sig.dlsim((np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C),
-                         np.asarray(sys.D), sys.dt), u)
-    return y
 
 
 # ---------------------------------------------------------------- the PID itself

@@ -16,24 +16,14 @@ import numpy as np
 import pytest
 import scipy.signal as sps
 
-from bayes_amb.cli.main import main
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.pid import design_decentralised_pid
 from bayes_amb.io.recording import load_recording, load_truth
 from bayes_amb.rig import CHANNELS, load_rig
+from tests.helpers import run_cli
 
 CONSOLE = Path(sys.executable).with_name("bayes-amb")
 ENV = {**os.environ, "OPENBLAS_NUM_THREADS": "1"}
-
-
-def run_cli(argv: list[str], capsys) -> tuple[int, str, str]:
-    """Exit status, stdout and stderr of main(argv); argparse errors raise SystemExit."""
-    try:
-        code = main(argv)
-    except SystemExit as exc:
-        code = exc.code
-    out, err = capsys.readouterr()
-    return code, out, err
 
 
 def test_paper_case_is_one_command(tmp_path, capsys):
