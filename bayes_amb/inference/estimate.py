@@ -13,6 +13,7 @@ import numpy as np
 import scipy.optimize as so
 from numpy.typing import NDArray
 
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet
 from bayes_amb.inference.whittle import WhittleLikelihood
 
@@ -195,7 +196,6 @@ def _local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 50
                                    "maxfev": 40 * maxiter, "adaptive": True})
         return res.x, True
     if method != "lbfgs":
-        from bayes_amb.errors import BayesAmbError
         raise BayesAmbError(f"unknown MAP method {method!r}; known: lbfgs, nelder-mead")
     h = _steps(post)
 

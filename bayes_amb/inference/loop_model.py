@@ -53,8 +53,7 @@ def loop_matrices(parts: LoopParts, Ap: NDArray, Bp: NDArray, Cp: NDArray
     nb, n_p, _ = Ap.shape
     nk, no = p.Ak.shape[0], p.A.shape[0]
     m = 4
-    Cu, Ce = p.Ck[:m], p.Ck[m:]
-    del Ce
+    Cu = p.Ck[:m]
     Duy, Due = p.Dk[:m, :m], p.Dk[:m, m:]
     Bky, Bke = p.Bk[:, :m], p.Bk[:, m:]
     eye, zero = np.eye(m), np.zeros((m, m))

@@ -44,6 +44,7 @@ from numpy.typing import NDArray
 from scipy.signal import lfilter, welch
 
 from bayes_amb.control.discrete import ss_freqresp
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.forward import ForwardModel, dft_response
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
@@ -128,7 +129,6 @@ class WhittleLikelihood:
     def __init__(self, forward: ForwardModel, eps: NDArray, n_bands: int = 256,
                  f_max_hz: float | str | None = "auto", noise_model: str = "loop"):
         if noise_model not in ("loop", "iid"):
-            from bayes_amb.errors import BayesAmbError
             raise BayesAmbError(f"unknown noise model {noise_model!r}; known: loop, iid")
         self.noise_model = noise_model
         self.forward = forward

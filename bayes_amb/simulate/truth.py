@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numpy.typing import NDArray
 
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rig import CHANNELS, Rig
 from bayes_amb.rotor import assemble, dof_index, full_model, state_matrices
@@ -88,7 +89,6 @@ def build_truth(rig: Rig, speed_rpm: float, kind: str = "full",
             A = red.A
         B, C, T_L = red.B, red.C, red.T_L
     else:
-        from bayes_amb.errors import BayesAmbError
         raise BayesAmbError(f"option --truth: unknown value {kind!r}; known: full, reduced")
     unb = None
     if "unbalance" in by_name:
