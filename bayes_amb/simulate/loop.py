@@ -57,14 +57,19 @@ _EIG_LIMIT = 1500   # largest closed-loop order whose eigenvalues are computed (
 
 def closed_loop_spectral_radius(truth: TruthPlant,
                                 controller: tuple[NDArray, NDArray, NDArray, NDArray],
-                                dt: float) -> float:
+                                dt: float,
+                                discrete: tuple[NDArray, int, NDArray, NDArray] | None = None
+                                ) -> float:
     """Spectral radius of the sampled closed loop that :func:`simulate_loop` runs.
+
+    ``discrete`` is the result of :func:`delayed_input_matrices` when the caller has it.
 
     States [x; x_k; u_p[k-1]; ...; u_p[k-m-1]] (plant, controller, held past plant inputs of
     the delay line). Returns nan when the order exceeds an internal limit (1500).
     """
     Ak, Bk, Ck, Dk = (np.asarray(m, dtype=float) for m in controller)
-    Ad, m_del, G_now, G_prev = delayed_input_matrices(truth.A, truth.B, dt, truth.delay_s)
+    Ad, m_del, G_now, G_prev = discrete or delayed_input_matrices(truth.A, truth.B, dt,
+                                                                   truth.delay_s)
     Cg = truth.sensor_gain[:, None] * truth.C
     n, nk, nu = Ad.shape[0], Ak.shape[0], truth.B.shape[1]
     size = n + nk + nu * (m_del + 1)
@@ -141,6 +146,7 @@ def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray
             break
     if unstable or not np.all(np.isfinite(y_rec)):
         unstable = True
-    elif closed_loop_spectral_radius(truth, (Ak, Bk, Ck, Dk), dt) >= 1.0:
+    elif closed_loop_spectral_radius(truth, (Ak, Bk, Ck, Dk), dt,
+                                     (Ad, m_del, G_now, G_prev)) >= 1.0:
         unstable = True   # a growing but still finite response is no rig recording either
     return LoopSignals(y=y_rec, u=u_rec, eps=eps, unstable=unstable)
