@@ -105,10 +105,10 @@ class ForwardModel:
 
     def validity_band_hz(self) -> float:
         """Half the frequency (|lambda|/2pi) of the lowest mode the reduction left out."""
-        poles = self.reduced.full.poles
-        kept = np.max(np.abs(self.reduced.poles))
-        left_out = np.abs(poles[np.abs(poles) > kept * (1 + 1e-9)])
-        return float(0.5 * np.min(left_out) / (2 * np.pi))
+        # the reduction keeps the n_states eigenvalues of smallest modulus, so the lowest
+        # left-out mode is the next one in that order (no tolerance on recomputed poles)
+        moduli = np.sort(np.abs(self.reduced.full.poles))
+        return float(0.5 * moduli[self.reduced.n_states] / (2 * np.pi))
 
     # ------------------------------------------------------------------ plants
     def plants(self, theta: NDArray) -> tuple[NDArray, NDArray]:
