@@ -95,10 +95,10 @@ def laplace_covariance(post: LogPosterior, x: NDArray) -> NDArray | None:
     noise-free data), the theta block conditional on the noise intensities is returned
     inside an otherwise diagonal covariance (1e-6 on log10 sigma).
     """
-    cov = _hessian_cov(post, x, np.arange(x.size))
+    cov = hessian_covariance(post, x, np.arange(x.size))
     if cov is not None:
         return cov
-    sub = _hessian_cov(post, x, np.arange(post.p))
+    sub = hessian_covariance(post, x, np.arange(post.p))
     if sub is None:
         return None
     full = np.diag(np.full(x.size, 1e-6))
@@ -106,7 +106,7 @@ def laplace_covariance(post: LogPosterior, x: NDArray) -> NDArray | None:
     return full
 
 
-def _hessian_cov(post: LogPosterior, x: NDArray, idx: NDArray) -> NDArray | None:
+def hessian_covariance(post: LogPosterior, x: NDArray, idx: NDArray) -> NDArray | None:
     d = idx.size
     h = (_steps(post) * 10)[idx]
     pts = [x]
@@ -183,7 +183,7 @@ def _initial_point(post: LogPosterior, theta0: NDArray) -> NDArray:
     return np.concatenate([theta0, grid[int(np.argmax(v))]])
 
 
-def _local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
+def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
                   ) -> tuple[NDArray, bool]:
     """One local maximisation of the log posterior from x (Nelder-Mead or L-BFGS-B)."""
     if method == "nelder-mead":
@@ -198,14 +198,32 @@ def _local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 50
     if method != "lbfgs":
         raise BayesAmbError(f"unknown MAP method {method!r}; known: lbfgs, nelder-mead")
     h = _steps(post)
+    x = np.asarray(x, dtype=float)
+    # Diagonal preconditioning: each coordinate is measured in units of its curvature
+    # scale at the start (second differences come free with the gradient), and the
+    # objective from its start value. Without it L-BFGS-B's first projected step, taken
+    # with an identity Hessian, can jump to a corner of the box, and its ftol (relative to
+    # |f| ~ 4e5) would let it stop after a negligible step.
+    pts = np.vstack([x, x + np.diag(h), x - np.diag(h)])
+    v = post(pts)
+    d = x.size
+    f0 = float(v[0]) if np.isfinite(v[0]) else 0.0
+    curv = -(v[1:d + 1] - 2 * v[0] + v[d + 1:]) / h**2
+    lo, hi = (np.array([np.nan if b is None else b for b in col], dtype=float)
+              for col in zip(*post.bounds(), strict=True))
+    width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+    scale = np.where(np.isfinite(curv) & (curv > 0), 1.0 / np.sqrt(np.abs(curv)), width)
+    scale = np.clip(scale, 1e-9, width)
 
-    def fun(v: NDArray) -> tuple[float, NDArray]:
-        f, g = _grad(post, v, h)
-        return (-f, -g) if np.isfinite(f) else (_BIG, np.zeros_like(v))
+    def fun(u: NDArray) -> tuple[float, NDArray]:
+        f, g = _grad(post, x + scale * u, h)
+        return (-(f - f0), -g * scale) if np.isfinite(f) else (_BIG, np.zeros_like(u))
 
-    res = so.minimize(fun, x, jac=True, method="L-BFGS-B", bounds=post.bounds(),
+    ubounds = [(None if np.isnan(a) else (a - xi) / si, None if np.isnan(b) else (b - xi) / si)
+               for a, b, xi, si in zip(lo, hi, x, scale, strict=True)]
+    res = so.minimize(fun, np.zeros(d), jac=True, method="L-BFGS-B", bounds=ubounds,
                       options={"maxiter": maxiter, "ftol": 1e-12, "gtol": 1e-6})
-    return res.x, bool(res.success)
+    return x + scale * res.x, bool(res.success)
 
 
 def _starts(post: LogPosterior, theta_ls: NDArray, n_random: int, seed: int) -> list[NDArray]:
@@ -244,7 +262,7 @@ def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = Non
         # sigma_r1 would be invisible to the start and stuck wherever it began
         post.likelihood.set_noise_reference(theta_ls)
         starts = _starts(post, theta_ls, n_random_starts, seed)
-        short = [_local_search(post, method, s, maxiter=40)[0] for s in starts]
+        short = [local_search(post, method, s, maxiter=40)[0] for s in starts]
         vals = post(np.array(short))
         x = short[int(np.argmax(vals))]
     else:
@@ -257,7 +275,7 @@ def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = Non
             alt = _initial_point(post, x[:post.p])
             if post(alt[None])[0] > post(x[None])[0]:
                 x = alt
-        x, success = _local_search(post, method, x)
+        x, success = local_search(post, method, x)
         if refresh_noise:
             post.likelihood.set_noise_reference(x[:post.p])
     lp = float(post(x[None])[0])

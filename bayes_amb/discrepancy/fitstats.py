@@ -1,0 +1,127 @@
+"""Numbers that describe one fitted model: predictions, fit quality, parameter summaries.
+
+Parameter summaries come from posterior draws: emcee samples when the model was sampled,
+otherwise draws from its Laplace approximation (stated in the output). Physical values of
+the candidates' parameters are computed draw by draw (e.g. bandwidth = 1/(2 pi tau)).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import welch
+
+from bayes_amb.discrepancy.locate import (
+    ljung_box,
+    whitened_series,
+    noise_cholesky,
+    whiten,
+)
+from bayes_amb.discrepancy.select import FittedModel
+from bayes_amb.rig import CHANNELS
+from bayes_amb.uncertainty import get_spec
+
+
+def hdi(values: NDArray, prob: float = 0.9) -> list[float]:
+    """Shortest interval holding a fraction prob of the draws.
+
+    Examples
+    --------
+    >>> hdi(np.arange(101.0), 0.9)
+    [0.0, 90.0]
+    """
+    v = np.sort(np.asarray(values, dtype=float))
+    n = v.size
+    k = max(1, int(np.floor(prob * n)))
+    if k >= n:
+        return [float(v[0]), float(v[-1])]
+    widths = v[k:] - v[:n - k]
+    i = int(np.argmin(widths))
+    return [float(v[i]), float(v[i + k])]
+
+
+def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
+    """Posterior draws of the parameters (n, p): emcee samples if present, else Laplace
+    draws clipped to the prior support (dimensions without covariance stay at the MAP)."""
+    if fitted.samples is not None:
+        return fitted.samples.reshape(-1, fitted.samples.shape[-1])[:, :fitted.p]
+    rng = np.random.default_rng(seed)
+    p = fitted.p
+    if fitted.cov is None:
+        return np.tile(fitted.params, (n, 1))
+    cov = fitted.cov[:p, :p]
+    d = rng.multivariate_normal(fitted.params, cov, size=n, method="eigh")
+    for j, (lo, hi) in enumerate(fitted.post.bounds()[:p]):
+        d[:, j] = np.clip(d[:, j], -np.inf if lo is None else lo, np.inf if hi is None else hi)
+    return d
+
+
+def theta_summary(fitted: FittedModel, samples: NDArray,
+                  truth: dict[str, float] | None = None) -> dict[str, dict[str, Any]]:
+    """Stiffness/damping parameters: mean, sd, hdi90 and the same in physical units."""
+    rig = fitted.forward.recording.rig
+    out: dict[str, dict[str, Any]] = {}
+    for j, name in enumerate(fitted.forward.theta_names):
+        spec = get_spec(name)
+        scale = spec.physical_scale(rig)
+        v = samples[:, j]
+        lo, hi = hdi(v)
+        out[name] = {"map": float(fitted.params[j]), "mean": float(np.mean(v)),
+                     "sd": float(np.std(v)), "hdi90": [lo, hi], "unit": spec.unit,
+                     "physical_mean": float(np.mean(v)) * scale,
+                     "physical_hdi90": sorted([lo * scale, hi * scale])}
+        if truth is not None and name in truth:
+            out[name]["true"] = truth[name]
+    return out
+
+
+def effect_summaries(fitted: FittedModel, samples: NDArray) -> list[dict[str, Any]]:
+    """Per candidate of the model: its physical parameters (mean, hdi90, unit)."""
+    fwd = fitted.forward
+    out = []
+    for c, sl in zip(fwd.candidates, fwd.slices, strict=True):
+        phys = c.physical(samples[:, sl], fwd.ctx)
+        at_map = c.physical(fitted.params[None, sl], fwd.ctx)
+        params = {}
+        for k, (vals, unit) in phys.items():
+            params[k] = {"mean": float(np.mean(vals)), "map": float(at_map[k][0][0]),
+                         "hdi90": hdi(vals), "unit": unit}
+        out.append({"effect": c.effect, "location": c.location, "params": params,
+                    "description": c.describe({k: v["map"] for k, v in params.items()}),
+                    "sampled": {n: float(fitted.x[fwd.params.index(n)])
+                                for n in fwd.params[sl]}})
+    return out
+
+
+def predict(fitted: FittedModel) -> NDArray:
+    """Time-domain eps_pred (N, 4) at the MAP: S(theta) x plus any synchronous lines."""
+    fwd = fitted.forward
+    pred = fwd.simulate(fitted.params[None])
+    for c in fwd.line_candidates:
+        sl = fwd.slices[fwd.candidates.index(c)]
+        basis = fwd.line_responses(fitted.params[None])[fwd.line_candidates.index(c)]
+        pred = pred + basis @ fitted.params[sl]
+    return pred
+
+
+def fit_quality(fitted: FittedModel, eps: NDArray) -> dict[str, Any]:
+    """Per channel: NRMSE = RMS(eps - eps_pred) / RMS(eps), and the Ljung-Box p-value of the
+    residual whitened by the model's own fitted noise spectrum."""
+    r = eps - predict(fitted)
+    nrmse = np.sqrt(np.mean(r**2, axis=0) / np.mean(eps**2, axis=0))
+    like = fitted.like
+    like.set_noise_reference(fitted.params)
+    R = like.residual_dft(fitted.params[None])[0][0]
+    W = whiten(noise_cholesky(like, fitted.log10_sigma), R)
+    _, lb = ljung_box(whitened_series(W, like.k, like.n), 20)
+    return {"nrmse": {ch: float(v) for ch, v in zip(CHANNELS, nrmse, strict=True)},
+            "whiteness_p": {ch: float(v) for ch, v in zip(CHANNELS, lb, strict=True)},
+            "residual": r}
+
+
+def residual_spectrum(r: NDArray, dt: float) -> tuple[NDArray, NDArray]:
+    """Welch PSD of a residual (f in Hz, PSD (nf, 4) in m^2/Hz)."""
+    nper = int(min(1024, max(64, r.shape[0] // 8)))
+    return welch(r, fs=1.0 / dt, nperseg=nper, axis=0)

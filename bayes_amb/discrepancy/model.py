@@ -1,0 +1,210 @@
+"""The nominal S(theta) forward model extended by candidate physics.
+
+The parameter vector of an extended model is [theta (the stiffness/damping parameters),
+phi_1, phi_2, ...] (each candidate's sampled parameters in turn). The plant for a batch of
+rows is built as
+
+    A0  = nominal reduced A (with the bending pairs the candidates ask for), modal hooks
+    A   = A0 + B_w Theta C_z        (LFT, eqs. 51-52; cross-coupling adds kxy_* columns)
+    (A, B, C) -> continuous hooks   (actuator lag adds lag states)
+    sampled exactly (ZOH, or a candidate's own sampling: fractional delay line)
+    (Ad, Bd, Cd) -> discrete hooks  (sensor gain)
+
+and closed with the recorded controller and the nominal dual-Youla filter (loop_model.py),
+so that the map x -> eps and the noise filters of eq. 14 are exact for the extended plant.
+With no candidates this is the nominal model evaluated through the general loop path.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.control.discrete import zoh
+from bayes_amb.discrepancy.candidates import Candidate, EffectParam, ModelContext
+from bayes_amb.inference.batched import zoh_batched
+from bayes_amb.inference.forward import ForwardModel, ModalBatch, diagonalise
+from bayes_amb.inference.loop_model import loop_matrices
+from bayes_amb.inference.priors import Prior, PriorSet, default_prior
+from bayes_amb.io.recording import Recording
+from bayes_amb.reduction import reduce_pseudo_modal
+from bayes_amb.reduction.pseudo_modal import N_RIGID
+from bayes_amb.uncertainty import lft_reduced
+
+
+def model_context(forward: ForwardModel) -> ModelContext:
+    """Rig, dt, speed and the FE bending modes (Hz, damping ratio) of a forward model."""
+    poles = forward.reduced.full.poles
+    bend = poles[forward.reduced.n_states:]
+    bend = bend[bend.imag > 0][:4]
+    return ModelContext(rig=forward.recording.rig, dt=forward.dt,
+                        speed_rpm=forward.recording.speed_rpm,
+                        bending_hz=tuple(float(v) for v in np.abs(bend) / (2 * np.pi)),
+                        bending_zeta=tuple(float(v) for v in -bend.real / np.abs(bend)))
+
+
+class ExtendedForwardModel(ForwardModel):
+    """x -> eps of the nominal model with candidate physics added (see module docstring).
+
+    ``names`` lists every sampled parameter (theta first), ``priors`` their priors and
+    ``null`` the values at which the model is the nominal one (FE values for flexible
+    modes).
+    """
+
+    def __init__(self, recording: Recording, params: str | tuple[str, ...],
+                 candidates: tuple[Candidate, ...] = (),
+                 priors: dict[str, Prior] | None = None):
+        super().__init__(recording, params)
+        self.fast = False
+        self.candidates = tuple(candidates)
+        self.theta_names = self.params
+        self.ctx = model_context(self)
+        n_bend = max((c.n_bending() for c in self.candidates), default=0)
+        self.base = (reduce_pseudo_modal(self.reduced.full, n_bending=n_bend) if n_bend
+                     else self.reduced)
+        lft_names = list(self.theta_names)
+        for c in self.candidates:
+            lft_names += [n for n in c.lft_names() if n not in lft_names]
+        self.plant = lft_reduced(self.base, recording.rig, tuple(lft_names))
+        eff: list[EffectParam] = []
+        self.slices: list[slice] = []
+        for c in self.candidates:
+            ps = c.params(self.ctx)
+            start = len(self.theta_names) + len(eff)
+            self.slices.append(slice(start, start + len(ps)))
+            eff += ps
+        self.effect_params = tuple(eff)
+        self.params = self.theta_names + tuple(e.name for e in eff)
+        # where each LFT parameter comes from in the full parameter vector
+        self._lft_index = np.array([self.params.index(n) for n in lft_names])
+        pri = dict(priors or {})
+        self.priors = PriorSet(self.params, tuple(
+            [pri.get(n, default_prior(n)) for n in self.theta_names]
+            + [e.prior for e in eff]))
+        self.null = np.array([0.0] * len(self.theta_names) + [e.null for e in eff])
+        self.line_candidates = tuple(c for c in self.candidates
+                                     if c.line_force(self.ctx) is not None)
+
+    # ------------------------------------------------------------------ plants
+    def phi(self, P: NDArray, i: int) -> NDArray:
+        """Rows of candidate i's parameters from a batch of full parameter vectors."""
+        return P[:, self.slices[i]]
+
+    def continuous_plants(self, P: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Continuous (A, B, C) stacks for a batch of parameter rows (modal, LFT, hooks)."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        nb = P.shape[0]
+        pl = self.plant
+        A = np.array(np.broadcast_to(pl.A, (nb, *pl.A.shape)))
+        for i, c in enumerate(self.candidates):
+            A = c.modal(A, self.phi(P, i), self.ctx, N_RIGID)
+        diag = np.repeat(P[:, self._lft_index], pl.blocks, axis=1)
+        A = A + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
+        B = np.array(np.broadcast_to(pl.B, (nb, *pl.B.shape)))
+        C = np.array(np.broadcast_to(pl.C, (nb, *pl.C.shape)))
+        for i, c in enumerate(self.candidates):
+            A, B, C = c.continuous(A, B, C, self.phi(P, i), self.ctx)
+        return A, B, C
+
+    def structure_keys(self, P: NDArray) -> NDArray:
+        """One integer key per row; rows with equal keys share the state dimension."""
+        key = np.zeros(P.shape[0], dtype=int)
+        for i, c in enumerate(self.candidates):
+            key = key * 64 + c.structure(self.phi(P, i), self.ctx)
+        return key
+
+    def sampled_plants(self, P: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Sampled (Ad, Bd, Cd) for rows that share one structure key."""
+        A, B, C = self.continuous_plants(P)
+        own = [c for c in self.candidates if type(c).discretise is not Candidate.discretise]
+        if own:
+            i = self.candidates.index(own[0])
+            Ad, Bd, E = own[0].discretise(A, B, self.phi(P, i), self.ctx)
+            Cd = C @ np.swapaxes(E, 1, 2)
+        else:
+            Ad, Bd = zoh_batched(A, B, self.dt)
+            Cd = C
+        for i, c in enumerate(self.candidates):
+            Ad, Bd, Cd = c.discrete(Ad, Bd, Cd, self.phi(P, i))
+        return Ad, Bd, Cd
+
+    def _loop(self, P: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        Ap, Bp, Cp = self.sampled_plants(P)
+        return loop_matrices(self.parts, Ap, Bp, Cp)
+
+    def excitation_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        A_cl, B_cl, C_cl, _ = self._loop(np.atleast_2d(theta))
+        return A_cl, B_cl[:, :, :4], C_cl
+
+    def noise_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+        A_cl, B_cl, C_cl, D_cl = self._loop(np.atleast_2d(theta))
+        return A_cl[0], B_cl[0][:, 4:], C_cl[0], D_cl[:, 4:]
+
+    def modal(self, theta: NDArray, x: NDArray | None = None
+              ) -> tuple[ModalBatch, NDArray | None]:
+        """Modal form of x -> eps for a batch; rows of different structure (e.g. integer
+        delays) are diagonalised apart and padded with inert modes (lambda = 0, B = C = 0)."""
+        P = np.atleast_2d(np.asarray(theta, dtype=float))
+        x = self.x if x is None else x
+        finite = np.all(np.isfinite(P), axis=1)
+        Pc = np.where(finite[:, None], P, self.null[None])
+        keys = self.structure_keys(Pc)
+        groups = [np.flatnonzero(keys == k) for k in np.unique(keys)]
+        parts = []
+        for idx in groups:
+            A, B, C = self.excitation_system(Pc[idx])
+            parts.append(diagonalise(A, B, C, x))
+        ns = max(mb.lam.shape[1] for mb, _ in parts)
+        nb, p = P.shape[0], self.plant.C.shape[0]
+        lam = np.zeros((nb, ns), dtype=complex)
+        Bm = np.zeros((nb, ns, 4), dtype=complex)
+        Cm = np.zeros((nb, p, ns), dtype=complex)
+        xi = np.zeros((nb, ns), dtype=complex)
+        stable = np.zeros(nb, dtype=bool)
+        for idx, (mb, xi_g) in zip(groups, parts, strict=True):
+            k = mb.lam.shape[1]
+            lam[idx, :k] = mb.lam
+            Bm[idx, :k] = mb.Bm
+            Cm[idx, :, :k] = mb.Cm
+            xi[idx, :k] = xi_g
+            stable[idx] = mb.stable
+        stable &= finite
+        return ModalBatch(lam=lam, Bm=Bm, Cm=Cm, stable=stable), xi
+
+    # ------------------------------------------------------------------ lines
+    def line_responses(self, P_ref: NDArray) -> list[NDArray]:
+        """For each line candidate, the eps response from rest (N, 4, 2) to its two basis
+        forces per unit of its parameters (a: cos, b: sin phase), at the parameters P_ref.
+
+        The loop is the nominal-structure loop at theta_ref (the force path does not see
+        the other candidates' small changes); the force is sampled and held (ZOH).
+        """
+        out = []
+        if not self.line_candidates:
+            return out
+        th = np.atleast_2d(np.asarray(P_ref, dtype=float))[:, :len(self.theta_names)]
+        A0 = self.plant.A + (self.plant.B_w * np.repeat(
+            np.concatenate([th[0], np.zeros(len(self._lft_index) - th.shape[1])]),
+            self.plant.blocks)) @ self.plant.C_z
+        n = A0.shape[0]
+        t = np.arange(self.x.shape[0])
+        w = self.ctx.omega_rot
+        z0 = np.exp(1j * w * self.dt)
+        for c in self.line_candidates:
+            Bf = self.base.T_L @ c.line_force(self.ctx)
+            Ad, G = zoh(A0, np.hstack([self.plant.B, Bf]), self.dt)
+            Bd, Bfd = G[:, :4], G[:, 4:]
+            A_cl, _, C_cl, _ = loop_matrices(self.parts, Ad[None], Bd[None], self.plant.C)
+            A_cl, C_cl = A_cl[0], C_cl[0]
+            Bcl = np.zeros((A_cl.shape[0], 2))
+            Bcl[:n] = Bfd
+            lam, V = np.linalg.eig(A_cl)
+            bm = np.linalg.solve(V, Bcl.astype(complex))              # (ns, 2)
+            cm = C_cl @ V                                              # (4, ns)
+            # response from rest to f[k] = F z0^k:  sum_i c_i b_i (lam_i^k - z0^k)/(lam_i - z0)
+            lk = lam[None, :] ** t[:, None]                            # (N, ns)
+            g = (lk - (z0 ** t)[:, None]) / (lam - z0)[None, :]
+            F = w**2 * c.UNIT * np.array([1.0, -1j])                   # a = 1: x cos, y sin
+            resp = (g * (bm @ F)[None, :]) @ cm.T                      # (N, 4) complex
+            out.append(np.stack([resp.real, -resp.imag], axis=2))   # Re((a + jb) resp)
+        return out

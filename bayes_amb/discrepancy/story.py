@@ -1,0 +1,72 @@
+"""The plain-language paragraph of a diagnosis: what was wrong, where it showed, what was
+added, how much better the fit is."""
+
+from __future__ import annotations
+
+from typing import Any
+
+
+def _bands(bands: list[list[float]]) -> str:
+    parts = [f"{lo:.0f}" if abs(hi - lo) < 1 else f"{lo:.0f}-{hi:.0f}" for lo, hi in bands[:4]]
+    more = f" and {len(bands) - 4} more" if len(bands) > 4 else ""
+    return ", ".join(parts) + more + " Hz"
+
+
+def _tests(findings: list[dict[str, Any]]) -> str:
+    names = {"coherence": "residual coherent with the excitation",
+             "floor": "residual power above the fitted noise floor",
+             "line": "a spectral line", "whiteness": "non-white residual",
+             "crosscorr": "residual correlated with the excitation",
+             "windows": "residual statistics changing over time"}
+    seen = []
+    for f in findings:
+        if f["test"] not in seen:
+            seen.append(f["test"])
+    return ", ".join(names[t] for t in seen)
+
+
+def plain_language(report: dict[str, Any]) -> str:
+    """One paragraph from the numbers of a diagnosis.json report."""
+    mm = report["mismatch"]
+    expl = report["explanations"]
+    if not mm["detected"] and not expl:
+        return ("No mismatch: the residual of the nominal model is consistent with the "
+                "fitted noise (no excitation-coherent band, no line, whiteness and "
+                f"cross-correlation tests pass at a family-wise {100 * mm['evidence']['alpha']:g} "
+                "% level), and no candidate physics improves the fit enough to be named.")
+    where = (f"on channel(s) {', '.join(mm['channels'])}"
+             + (f", in {_bands(mm['bands_hz'])}" if mm["bands_hz"] else "")
+             + (f", between {mm['time_s'][0]:.2f} and {mm['time_s'][1]:.2f} s"
+                if mm["time_s"] else ""))
+    text = []
+    if mm["detected"]:
+        text.append(f"The nominal model does not explain this recording: "
+                    f"{_tests(mm['findings'])} {where} (evidence "
+                    f"{mm['evidence']['strength']}, smallest adjusted p = "
+                    f"{mm['evidence']['p_adjusted_min']:.1e}).")
+    else:
+        text.append("The location tests found nothing significant at their family-wise level,"
+                    " but a candidate model still fits clearly better.")
+    if expl:
+        what = "; ".join(f"{e['description']} (90 % HDI of "
+                         + ", ".join(f"{k} [{v['hdi90'][0]:.3g}, {v['hdi90'][1]:.3g}] {v['unit']}"
+                                     for k, v in e["params"].items())
+                         + f"; log Bayes factor {e['score']:.1f})" for e in expl)
+        text.append(f"Added to the model: {what}.")
+        fb, fa = report["fit"]["before"], report["fit"]["after"]
+        chans = list(fb["nrmse"])
+        nr = ", ".join(f"{c} {fb['nrmse'][c]:.3f} -> {fa['nrmse'][c]:.3f}" for c in chans)
+        wp = min(fa["whiteness_p"].values())
+        text.append(f"The log-likelihood rises by {report['fit']['log_likelihood_gain']:.0f}; "
+                    f"NRMSE per channel {nr}; smallest whiteness p-value after: {wp:.2g}.")
+        pb, pa = report["parameters_before"], report["parameters_after"]
+        moved = [f"{n} {pb[n]['mean']:+.3f} -> {pa[n]['mean']:+.3f}" for n in pb
+                 if abs(pa[n]["mean"] - pb[n]["mean"]) > pb[n]["sd"]]
+        if moved:
+            text.append("Estimates that moved by more than their sd once the physics was "
+                        f"added: {', '.join(moved)}.")
+    else:
+        text.append("None of the candidate physics (actuator lag, time delay, cross-coupling, "
+                    "flexible modes, unbalance, sensor gain) explains it: the model is wrong "
+                    "in a way outside the library, or the noise is not as modelled.")
+    return " ".join(text)
