@@ -1,2 +1,26 @@
-"""Model discrepancy: locate where the nominal model fails, name the missing physics, model
-it and show the fit improve."""
+"""Model discrepancy: locate where the nominal model fails, name the physics that was left
+out, model it, and show the fit improve.
+
+    from bayes_amb.discrepancy import diagnose
+    d = diagnose(load_recording("realistic.csv"), "k_By,c_By")
+    d.report["explanations"]          # the named effects with their physical parameters
+    d.save("runs/diag")               # diagnosis.json, residuals.nc, models/*.nc
+"""
+
+from bayes_amb.discrepancy.candidates import (
+    VOCABULARY,
+    ActuatorLag,
+    Candidate,
+    CrossCoupling,
+    FlexibleMode,
+    SensorGain,
+    TimeDelay,
+    Unbalance,
+    all_candidates,
+)
+from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
+from bayes_amb.discrepancy.locate import Location, LocateOptions, locate
+
+__all__ = ["VOCABULARY", "ActuatorLag", "Candidate", "CrossCoupling", "DiagnoseOptions",
+           "Diagnosis", "FlexibleMode", "LocateOptions", "Location", "SensorGain", "TimeDelay",
+           "Unbalance", "all_candidates", "diagnose", "locate"]

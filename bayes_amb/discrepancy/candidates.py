@@ -8,8 +8,9 @@ order, all vectorised over a batch of parameter rows phi (nb, q):
 1. ``lft_names``    extra LFT parameters (cross-coupled stiffness, eqs. 48-52)
 2. ``n_bending``    bending-mode pairs the reduction must keep (flexible modes)
 3. ``modal``        change of the nominal modal blocks before the LFT (bending frequency)
-4. ``continuous``   change of the continuous plant (A, B, C) (modal shift, actuator lag)
-5. ``discretise``   its own exact sampling of the plant (fractional control delay)
+4. ``continuous``   change of the continuous plant (A, B, C)
+5. ``discretise``   its own exact sampling of the plant (actuator lag, fractional delay;
+                    at most one such candidate per model: they are alternatives)
 6. ``discrete``     change of the sampled plant (sensor gain)
 7. ``line_force``         a deterministic input not driven by the excitation (unbalance)
 
@@ -72,6 +73,7 @@ class Candidate:
     location: str
 
     fingerprint = ""
+    own_sampling = False     # samples the plant itself (one such candidate per model)
 
     @property
     def key(self) -> str:
@@ -135,30 +137,51 @@ class ActuatorLag(Candidate):
 
     fingerprint = ("phase lag growing with frequency and a magnitude roll-off above the "
                    "actuator bandwidth, on the channels of the lagged bearing(s)")
+    own_sampling = True
 
     def params(self, ctx: ModelContext) -> tuple[EffectParam, ...]:
         # bandwidths from 100 Hz (tau 1.59 ms) upwards; 0 is no lag
         return (EffectParam("lag_ms", Prior("uniform", 0.0, 1.6), 0.0, "ms"),)
 
-    def continuous(self, A, B, C, phi, ctx):
-        tau = np.maximum(phi[:, 0], 1e-7) * 1e-3                       # s
-        wc = 1.0 / tau
+    def discretise(self, A, B, phi, ctx):
+        """Exact sampling with the lag (no stiff matrix exponential): within a sample the
+        force of a lagged coil is f(t) = u + (x_l - u) e^{-t/tau}, so
+
+            x+   = Ad x + Gamma u + J (x_l - u)_lagged,   x_l+ = e^{-dt/tau} x_l + (1 - e^{-dt/tau}) u
+            J    = e^{A dt} (A + I/tau)^-1 (I - e^{-dt/tau} e^{-A dt}) B_lagged,
+
+        which tends to the plain ZOH as tau -> 0."""
+        dt = ctx.dt
+        tau = np.maximum(phi[:, 0], 0.0) * 1e-3                          # s
         lagged = _lag_channels(self.location)
-        nb, n, m = B.shape
+        nb, n, nu = B.shape
         q = len(lagged)
-        A2 = np.zeros((nb, n + q, n + q))
-        A2[:, :n, :n] = A
-        A2[:, :n, n:] = B[:, :, lagged]
-        A2[:, n + np.arange(q), n + np.arange(q)] = -wc[:, None]
-        B2 = np.zeros((nb, n + q, m))
-        direct = [i for i in range(m) if i not in lagged]
-        B2[:, :n, direct] = B[:, :, direct]
-        B2[:, n + np.arange(q), lagged] = wc[:, None]
-        C2 = np.concatenate([C, np.zeros((nb, C.shape[1], q))], axis=2)
-        return A2, B2, C2
+        Ad, G = _zoh_scaled(A, B, np.full(nb, dt))
+        eye = np.eye(n)
+        with np.errstate(divide="ignore", over="ignore", invalid="ignore"):
+            inv_tau = np.where(tau > 0, 1.0 / np.where(tau > 0, tau, 1.0), np.inf)
+            decay = np.exp(-dt * inv_tau)                                # 0 for tau = 0
+        J = np.zeros((nb, n, q))
+        live = tau > 0
+        if np.any(live):
+            Ainv = np.linalg.inv(Ad[live])                               # e^{-A dt}
+            M = A[live] + inv_tau[live, None, None] * eye
+            rhs = (eye - decay[live, None, None] * Ainv) @ B[live][:, :, lagged]
+            J[live] = Ad[live] @ np.linalg.solve(M, rhs)
+        A_aug = np.zeros((nb, n + q, n + q))
+        B_aug = np.zeros((nb, n + q, nu))
+        A_aug[:, :n, :n] = Ad
+        A_aug[:, :n, n:] = J
+        A_aug[:, n + np.arange(q), n + np.arange(q)] = decay[:, None]
+        B_aug[:, :n] = G
+        B_aug[:, :n, lagged] -= J
+        B_aug[:, n + np.arange(q), lagged] = (1.0 - decay)[:, None]
+        E = np.zeros((nb, n + q, n))
+        E[:, :n, :n] = eye
+        return A_aug, B_aug, E
 
     def physical(self, draws, ctx):
-        tau = np.maximum(draws[:, 0], 1e-9) * 1e-3
+        tau = np.maximum(draws[:, 0], 1e-12) * 1e-3
         return {"bandwidth_hz": (1.0 / (2 * np.pi * tau), "Hz")}
 
     def describe(self, values):
@@ -174,6 +197,7 @@ class TimeDelay(Candidate):
 
     fingerprint = ("phase lag growing linearly with frequency, no change of magnitude, on "
                    "every channel")
+    own_sampling = True
 
     def max_delay_ms(self, ctx: ModelContext) -> float:
         return max(4 * ctx.dt, 4e-4) * 1e3

@@ -32,6 +32,8 @@ Deterministic lines (unbalance) enter the mean through precomputed basis respons
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
@@ -72,6 +74,15 @@ class RobustWhittle(WhittleLikelihood):
         self.shift = scale_shift(self.counts)
         self._gamma_term = (log_complex_gamma(self.nu + self.counts)
                             - log_complex_gamma(self.nu))
+
+    def for_model(self, forward: ExtendedForwardModel, theta_ref: NDArray) -> RobustWhittle:
+        """The same data, bands and prewhitening for another model of the same recording,
+        with this likelihood's noise filters held fixed (see set_noise_reference)."""
+        new = copy.copy(self)
+        new.forward = forward
+        new.fixed_filters = self.phi_sources
+        new.set_noise_reference(theta_ref)
+        return new
 
     def set_noise_reference(self, theta_ref: NDArray) -> None:
         """Noise filters and the line bases at theta_ref (plug-in, refreshed by the fit).

@@ -180,11 +180,12 @@ def _xcorr(e: NDArray, x: NDArray, lags: int) -> tuple[NDArray, NDArray]:
     return out, stats.chi2.sf(q, lags + 1)
 
 
-def _lines(R: NDArray, like: RobustWhittle, f_rot: float) -> tuple[list[dict[str, Any]],
+def _lines(W: NDArray, like: RobustWhittle, f_rot: float) -> tuple[list[dict[str, Any]],
                                                                     NDArray]:
-    """Bins whose power stands out of a running median (51 bins); Bonferroni p-values."""
-    P = np.abs(R) ** 2
-    med = median_filter(P, size=(51, 1), mode="nearest") / np.log(2)
+    """Bins of the whitened residual W whose power stands out of a running median of 51
+    bins (exponential null: the median of Exp(1) is ln 2); Bonferroni p-values."""
+    P = np.abs(W) ** 2
+    med = median_filter(P, size=(51, 1), mode="reflect") / np.log(2)
     ratio = P / np.maximum(med, 1e-300)
     n_tests = ratio.size
     p_bin = np.minimum(1.0, np.exp(-ratio) * n_tests)
@@ -270,7 +271,7 @@ def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
     xs = like.forward.x
     xc, xc_p = _xcorr(e, xs, opt.xcorr_lags)
     f_rot = like.forward.recording.speed_rpm / 60.0
-    lines, line_p = _lines(R, like, f_rot)
+    lines, line_p = _lines(W, like, f_rot)
     win_p, window = _windows(e, opt.n_windows, like.forward.dt)
     families = {"coherence": coh_p.ravel(), "floor": floor_p, "whiteness": lb_p,
                 "crosscorr": xc_p.ravel(), "lines": np.array([line_p]), "windows": win_p}

@@ -28,8 +28,8 @@ from bayes_amb.inference.loop_model import loop_matrices
 from bayes_amb.inference.priors import Prior, PriorSet, default_prior
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
-from bayes_amb.reduction.pseudo_modal import N_RIGID
-from bayes_amb.uncertainty import lft_reduced
+from bayes_amb.reduction.pseudo_modal import N_RIGID, ReducedModel
+from bayes_amb.uncertainty import lft_reduced, parse_param_list
 
 
 def model_context(forward: ForwardModel) -> ModelContext:
@@ -51,17 +51,35 @@ class ExtendedForwardModel(ForwardModel):
     modes).
     """
 
+    _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases")
+
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
                  candidates: tuple[Candidate, ...] = (),
-                 priors: dict[str, Prior] | None = None):
-        super().__init__(recording, params)
+                 priors: dict[str, Prior] | None = None,
+                 template: ExtendedForwardModel | None = None):
+        if template is not None and template.recording is recording:
+            # same recording: reuse the FE model, reductions and loop parts
+            for k in self._SHARED:
+                setattr(self, k, getattr(template, k))
+            self.params = parse_param_list(params)
+        else:
+            super().__init__(recording, params)
+            self.ctx = model_context(self)
+            self._bases: dict[int, ReducedModel] = {0: self.reduced}
+        # the observer form below needs the controller's own observer = the offline filter
+        if template is not None and template.recording is recording:
+            self.observer_form = template.observer_form
+            if self.observer_form:
+                self.F, self.L = template.F, template.L
+        else:
+            self.observer_form = self.fast
         self.fast = False
         self.candidates = tuple(candidates)
         self.theta_names = self.params
-        self.ctx = model_context(self)
         n_bend = max((c.n_bending() for c in self.candidates), default=0)
-        self.base = (reduce_pseudo_modal(self.reduced.full, n_bending=n_bend) if n_bend
-                     else self.reduced)
+        if n_bend not in self._bases:
+            self._bases[n_bend] = reduce_pseudo_modal(self.reduced.full, n_bending=n_bend)
+        self.base = self._bases[n_bend]
         lft_names = list(self.theta_names)
         for c in self.candidates:
             lft_names += [n for n in c.lft_names() if n not in lft_names]
@@ -116,7 +134,10 @@ class ExtendedForwardModel(ForwardModel):
     def sampled_plants(self, P: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         """Sampled (Ad, Bd, Cd) for rows that share one structure key."""
         A, B, C = self.continuous_plants(P)
-        own = [c for c in self.candidates if type(c).discretise is not Candidate.discretise]
+        own = [c for c in self.candidates if c.own_sampling]
+        if len(own) > 1:
+            raise ValueError(f"candidates {[c.key for c in own]} both sample the plant; "
+                             "a model takes at most one of them")
         if own:
             i = self.candidates.index(own[0])
             Ad, Bd, E = own[0].discretise(A, B, self.phi(P, i), self.ctx)
@@ -133,8 +154,28 @@ class ExtendedForwardModel(ForwardModel):
         return loop_matrices(self.parts, Ap, Bp, Cp)
 
     def excitation_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-        A_cl, B_cl, C_cl, _ = self._loop(np.atleast_2d(theta))
-        return A_cl, B_cl[:, :, :4], C_cl
+        """(A, B, C) of x -> eps. For the observer-based controller with eta injected at its
+        Youla port the offline filter's states duplicate the controller's, so the loop is
+        written on [plant; xhat] only: xhat+ = (A + BF + LC) xhat - L Cp x_p + B eta,
+        u = F xhat + eta, eps = Cp x_p - C xhat (one third fewer modes than the general
+        loop, same map)."""
+        P = np.atleast_2d(theta)
+        if not self.observer_form:
+            A_cl, B_cl, C_cl, _ = self._loop(P)
+            return A_cl, B_cl[:, :, :4], C_cl
+        Ap, Bp, Cp = self.sampled_plants(P)
+        A, B, C = self.parts.A, self.parts.B, self.parts.C
+        nb, n_p, _ = Ap.shape
+        n = A.shape[0]
+        Cp = np.broadcast_to(Cp, (nb, *Cp.shape[-2:]))
+        A_cl = np.zeros((nb, n_p + n, n_p + n))
+        A_cl[:, :n_p, :n_p] = Ap
+        A_cl[:, :n_p, n_p:] = Bp @ self.F
+        A_cl[:, n_p:, :n_p] = -self.L @ Cp
+        A_cl[:, n_p:, n_p:] = A + B @ self.F + self.L @ C
+        B_cl = np.concatenate([Bp, np.broadcast_to(B, (nb, *B.shape))], axis=1)
+        C_cl = np.concatenate([Cp, np.broadcast_to(-C, (nb, *C.shape))], axis=2)
+        return A_cl, B_cl, C_cl
 
     def noise_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         A_cl, B_cl, C_cl, D_cl = self._loop(np.atleast_2d(theta))

@@ -100,13 +100,22 @@ class FittedModel:
 
 
 def build(recording: Recording, params: tuple[str, ...], eps: NDArray,
-          candidates: tuple[Candidate, ...] = (), priors: dict[str, Prior] | None = None,
-          noise_filters: NDArray | None = None
+          candidates: tuple[Candidate, ...] = (), priors: dict[str, Prior] | None = None
           ) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
-    """Forward model, likelihood and posterior of the nominal model plus candidates
-    (noise_filters: the nominal fit's, shared by every model it is compared with)."""
+    """Forward model, likelihood and posterior of the nominal model plus candidates."""
     fwd = ExtendedForwardModel(recording, params, candidates, priors)
-    like = RobustWhittle(fwd, eps, noise_filters=noise_filters)
+    like = RobustWhittle(fwd, eps)
+    return fwd, like, LogPosterior(like, fwd.priors)
+
+
+def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None
+           ) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
+    """Parent + candidate, sharing the parent's recording data and noise filters (models
+    compared with each other share one noise-spectrum family)."""
+    pf = parent.forward
+    fwd = ExtendedForwardModel(pf.recording, pf.theta_names, parent.candidates + (cand,),
+                               priors, template=pf)
+    like = parent.like.for_model(fwd, np.concatenate([fwd.null]))
     return fwd, like, LogPosterior(like, fwd.priors)
 
 
@@ -168,11 +177,10 @@ class Screen:
     phi: dict[str, float]
 
 
-def screen(parent: FittedModel, cand: Candidate, recording: Recording, eps: NDArray,
-           priors: dict[str, Prior] | None = None) -> Screen:
+def screen(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None
+           ) -> Screen:
     """Fit only the candidate's parameters, the rest held at the parent's MAP."""
-    fwd, like, post = build(recording, parent.forward.theta_names, eps,
-                            parent.candidates + (cand,), priors, parent.like.phi_sources)
+    fwd, like, post = extend(parent, cand, priors)
     x0 = _embed(parent, fwd)
     like.set_noise_reference(x0[:len(fwd.params)])
     idx = np.arange(fwd.slices[-1].start, fwd.slices[-1].stop)
@@ -190,13 +198,13 @@ def screen(parent: FittedModel, cand: Candidate, recording: Recording, eps: NDAr
         x = best.copy()
         x[idx] = v
         f = float(post(x[None])[0])
-        return -f if np.isfinite(f) else 1e300
+        return -(f - base) if np.isfinite(f) else 1e300
 
-    res = so.minimize(neg, best[idx], method="L-BFGS-B", bounds=bnds,
-                      options={"maxiter": 60})
+    res = so.minimize(neg, best[idx], method="Nelder-Mead", bounds=bnds,
+                      options={"maxfev": 40 * idx.size, "xatol": 1e-6, "fatol": 1e-3})
     x = best.copy()
     x[idx] = res.x
-    gain = -float(res.fun) - base
+    gain = -float(res.fun)
     if not np.isfinite(gain):
         gain = -np.inf
     return Screen(cand, gain, {fwd.params[j]: float(x[j]) for j in idx})
@@ -205,16 +213,17 @@ def screen(parent: FittedModel, cand: Candidate, recording: Recording, eps: NDAr
 def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | None:
     """Laplace covariance over the dimensions not on a prior bound (zeros elsewhere).
 
-    If the Hessian over all of them is not negative definite (a noise intensity the data
-    do not inform is flat), the noise intensities are held fixed; failing that, only the
-    last ``last`` parameters (a candidate's own) are kept.
+    The noise intensities are held fixed (they are nearly independent of the physical
+    parameters, and one the data do not inform is flat); if that Hessian is not negative
+    definite, all free dimensions are tried, then only the last ``last`` parameters (a
+    candidate's own).
     """
     bnds = _bounds(post)
     span = np.array([hi - lo if np.isfinite(hi - lo) else 1.0 for lo, hi in bnds])
     at_bound = np.array([min(abs(v - lo), abs(hi - v)) < 1e-6 * s
                          for v, (lo, hi), s in zip(x, bnds, span, strict=True)])
     free = np.flatnonzero(~at_bound)
-    tries = [free, free[free < post.p]]
+    tries = [free[free < post.p], free]
     if last:
         tries.append(free[(free >= post.p - last) & (free < post.p)])
     for idx in tries:
@@ -228,22 +237,18 @@ def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | 
     return None
 
 
-def refine(parent: FittedModel, sc: Screen, recording: Recording, eps: NDArray,
-           priors: dict[str, Prior] | None = None) -> FittedModel:
+def refine(parent: FittedModel, sc: Screen, priors: dict[str, Prior] | None = None
+           ) -> FittedModel:
     """Full MAP of parent + candidate from the screening point; Laplace Bayes factor."""
-    fwd, like, post = build(recording, parent.forward.theta_names, eps,
-                            parent.candidates + (sc.candidate,), priors,
-                            parent.like.phi_sources)
+    fwd, like, post = extend(parent, sc.candidate, priors)
     x0 = _embed(parent, fwd, sc.phi)
     like.set_noise_reference(x0[:len(fwd.params)])
     # two starts: the parent's stiffness/damping values, which may sit where they absorbed
     # the missing physics (e.g. on a prior bound), and those parameters at their null
-    x, log_post = local_fit(post, x0)
     alt0 = x0.copy()
     alt0[:len(fwd.theta_names)] = 0.0
-    alt, log_alt = local_fit(post, alt0)
-    if log_alt > log_post:
-        x, log_post = alt, log_alt
+    v = post(np.vstack([x0, alt0]))
+    x, log_post = local_fit(post, x0 if v[0] >= v[1] else alt0)
     idx = np.arange(fwd.slices[-1].start, fwd.slices[-1].stop)
     cov = free_covariance(post, x, last=idx.size)
     log_bf = -np.inf
@@ -268,8 +273,8 @@ class Selection:
     scores: list[dict[str, Any]]
 
 
-def select(nominal: FittedModel, recording: Recording, eps: NDArray,
-           options: SelectOptions | None = None, priors: dict[str, Prior] | None = None,
+def select(nominal: FittedModel, options: SelectOptions | None = None,
+           priors: dict[str, Prior] | None = None,
            progress: Callable[[str], None] | None = None) -> Selection:
     """Greedy forward selection of candidate physics on top of the nominal fit."""
     opt = options or SelectOptions()
@@ -278,14 +283,14 @@ def select(nominal: FittedModel, recording: Recording, eps: NDArray,
     scores: list[dict[str, Any]] = []
     for rnd in range(1, opt.max_effects + 1):
         used = {c.effect for c in current.candidates}
-        pool = [c for c in opt.candidates if c.effect not in used]
+        sampled = any(c.own_sampling for c in current.candidates)
+        pool = [c for c in opt.candidates if c.effect not in used
+                and not (sampled and c.own_sampling)]
         if not pool:
             break
-        screens = []
-        for c in pool:
-            if progress:
-                progress(f"round {rnd}: screening {c.key}")
-            screens.append(screen(current, c, recording, eps, priors))
+        if progress:
+            progress(f"round {rnd}: screening {len(pool)} candidates")
+        screens = [screen(current, c, priors) for c in pool]
         screens.sort(key=lambda s: -s.gain)
         refined: list[FittedModel] = []
         for sc in screens[:opt.n_refine]:
@@ -293,7 +298,7 @@ def select(nominal: FittedModel, recording: Recording, eps: NDArray,
                 break
             if progress:
                 progress(f"round {rnd}: fitting {sc.candidate.key}")
-            refined.append(refine(current, sc, recording, eps, priors))
+            refined.append(refine(current, sc, priors))
         by_key = {f.candidates[-1].key: f for f in refined}
         for sc in screens:
             f = by_key.get(sc.candidate.key)

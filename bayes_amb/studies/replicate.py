@@ -18,6 +18,7 @@ from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.inference.priors import parse_prior
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import simulate_recording
+from bayes_amb.studies.concealed import run_case
 from bayes_amb.studies.spec import StudySpec, cell_estimate, simulation_config
 
 N_RANK_DRAWS = 99
@@ -71,6 +72,14 @@ def run_replicate(spec: StudySpec, cell_index: int, rep: int) -> dict[str, Any]:
                            "inference": spec.inference, "estimate": ",".join(estimate)}
     row.update({f"f_{k}": v for k, v in cell.items()})
     row.update({f"true_{k}": v for k, v in truth.items()})
+    if spec.inference == "diagnose":
+        rig = load_rig(spec.rig)
+        cfg = simulation_config(spec, cell, sim_seed, truth)
+        ctrl = _controller(spec, rig, cfg.dt, cfg.speed_rpm)
+        row.update(run_case(rig, ctrl, cfg, cell.get("case", "none"), estimate, sim_seed,
+                            draw_seed))
+        row["wall_s"] = time.perf_counter() - t0
+        return row
     try:
         rig = load_rig(spec.rig)
         cfg = simulation_config(spec, cell, sim_seed, truth)

@@ -31,7 +31,9 @@ A study is a grid of simulated experiments. Example (studies/noise.toml)::
 
 Factor names: any [simulation] key (noise_rms, r1_rms, r2_rms, r1_band_hz, r2_band_hz,
 excitation, amplitude, duration, dt, speed_rpm, truth), ``true.NAME`` for a true parameter
-value, and ``estimate`` (a comma-separated parameter list).
+value, and ``estimate`` (a comma-separated parameter list). Studies with inference =
+"diagnose" (the concealed-effect benchmark, see bayes_amb.studies.concealed) take a factor
+``case``: "none", an effect name, or a pair "a+b".
 """
 
 from __future__ import annotations
@@ -44,6 +46,7 @@ from typing import Any
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import parse_prior
 from bayes_amb.simulate import SimulationConfig, parse_effect
+from bayes_amb.studies.concealed import case_effects
 from bayes_amb.tomlfile import read_toml
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
@@ -125,9 +128,9 @@ def study_from_dict(d: dict[str, Any], source: str = "<dict>") -> StudySpec:
         raise _fail(source, "study.seed", f"expected a non-negative integer, got {seed!r}")
     if not isinstance(reps, int) or isinstance(reps, bool) or reps < 1:
         raise _fail(source, "study.replicates", f"expected a positive integer, got {reps!r}")
-    if inference not in ("posterior", "laplace"):
-        raise _fail(source, "study.inference", f"expected 'posterior' or 'laplace', got "
-                    f"{inference!r}")
+    if inference not in ("posterior", "laplace", "diagnose"):
+        raise _fail(source, "study.inference", f"expected 'posterior', 'laplace' or "
+                    f"'diagnose', got {inference!r}")
     rig = _table(d, "rig", source, required=False).get("file", "reference")
     tr = _table(d, "truth", source)
     plant = tr.get("plant", "full")
@@ -173,10 +176,19 @@ def study_from_dict(d: dict[str, Any], source: str = "<dict>") -> StudySpec:
     for k, v in factors.items():
         if not isinstance(v, list) or not v:
             raise _fail(source, f"factors.{k}", f"expected a non-empty list, got {v!r}")
+        if k == "case":
+            if inference != "diagnose":
+                raise _fail(source, "factors.case", "only for inference = 'diagnose'")
+            for c in v:
+                try:
+                    case_effects(c)
+                except ValueError as exc:
+                    raise _fail(source, "factors.case", str(exc)) from None
+            continue
         if not (k in SIM_KEYS or k == "estimate" or (k.startswith("true.") and
                                                       _known(k[5:]))):
             raise _fail(source, f"factors.{k}", "unknown factor (simulation keys, "
-                        "true.NAME or estimate)")
+                        "true.NAME, estimate, or case for diagnose studies)")
     spec = StudySpec(name=name, description=st.get("description", ""), seed=seed,
                      replicates=reps, inference=inference, rig=rig, plant=plant,
                      true_params=true_params, draw_from_prior=draw, effects=effects,

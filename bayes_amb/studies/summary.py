@@ -13,6 +13,7 @@ import numpy as np
 from scipy import stats
 
 from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
+from bayes_amb.studies.concealed import benchmark_conclusions, benchmark_table
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec, cell_estimate
 
@@ -164,6 +165,8 @@ def finalise(spec: StudySpec, rows: list[dict[str, Any]], out_dir: str | Path,
     """Write results.csv, summary.csv, results.nc and conclusions into study.json."""
     out = Path(out_dir)
     write_csv(out / "results.csv", rows)
+    if spec.inference == "diagnose":
+        return _finalise_benchmark(rows, out)
     summ = cell_summary(spec, rows)
     write_csv(out / "summary.csv", summ)
     _write_netcdf(out / "results.nc", rows)
@@ -178,10 +181,25 @@ def finalise(spec: StudySpec, rows: list[dict[str, Any]], out_dir: str | Path,
     return manifest
 
 
+def _finalise_benchmark(rows: list[dict[str, Any]], out: Path) -> dict[str, Any]:
+    """Concealed-effect benchmark: per-case table (summary.csv) and the four targets."""
+    table = benchmark_table(rows)
+    write_csv(out / "summary.csv", [{"case": c, **v} for c, v in table["per_case"].items()])
+    _write_netcdf(out / "results.nc", rows)
+    manifest = json.loads((out / "study.json").read_text(encoding="utf-8"))
+    manifest.update({"n_rows": len(rows), "failures": sum(bool(r.get("error")) for r in rows),
+                     "conclusions": benchmark_conclusions(table), "benchmark": table,
+                     "wall_s_total": float(sum(r.get("wall_s", 0.0) for r in rows))})
+    write_text_atomic(out / "study.json", json.dumps(manifest, indent=2) + "\n")
+    return manifest
+
+
 def _write_netcdf(path: Path, rows: list[dict[str, Any]]) -> None:
     import xarray as xr
 
-    keys = [k for k in rows[0] if k != "traceback"] if rows else []
+    keys: list[str] = []
+    for r in rows:                     # union of the rows' keys (diagnose rows differ)
+        keys += [k for k in r if k not in keys and k != "traceback"]
     data = {}
     for k in keys:
         vals = [r.get(k) for r in rows]

@@ -1,0 +1,105 @@
+"""`bayes-amb diagnose`: locate the model mismatch, name the missing physics, model it."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.discrepancy import VOCABULARY, DiagnoseOptions, all_candidates, diagnose
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.priors import load_prior_file, parse_prior_assignment
+from bayes_amb.io.recording import load_recording
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("diagnose", help="locate and explain model discrepancy",
+                       description="Fit the nominal model over the whole band, locate where "
+                       "its residual fails (channels, bands, time), try the library of "
+                       "candidate physics (" + ", ".join(VOCABULARY) + "), accept effects "
+                       "greedily by Bayes factor and compare the fit before and after. "
+                       "Writes DIR/diagnosis.json, DIR/residuals.nc and DIR/models/*.nc.")
+    p.add_argument("recording", metavar="NAME.csv")
+    p.add_argument("--params", default="k_By,c_By",
+                   help="stiffness/damping parameters kept in every model (default k_By,c_By)")
+    p.add_argument("--prior", action="append", default=[], metavar="NAME=kind(a,b)",
+                   help="prior of a stiffness/damping parameter (repeatable)")
+    p.add_argument("--prior-file", default=None, help="TOML file with a [priors] table")
+    p.add_argument("--effects", default=",".join(VOCABULARY),
+                   help="effects to try (comma-separated; default all)")
+    p.add_argument("--threshold", type=float, default=3.0,
+                   help="log Bayes factor above which an effect is accepted (default 3)")
+    p.add_argument("--max-effects", type=int, default=3)
+    p.add_argument("--sample", action="store_true",
+                   help="emcee posteriors of the nominal and final models (default Laplace)")
+    p.add_argument("--steps", type=int, default=2000, help="emcee steps with --sample")
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--out", required=True, metavar="DIR")
+    p.add_argument("--no-progress", action="store_true", help="no progress messages")
+    p.add_argument("--json", action="store_true", help="print diagnosis.json to stdout")
+    p.set_defaults(func=run)
+
+
+def format_report(r: dict) -> str:
+    mm = r["mismatch"]
+    lines = [f"Diagnosis of {r['recording']} ({r['inference']}, {r['wall_s']:.0f} s)",
+             f"mismatch      : {'DETECTED' if mm['detected'] else 'none'}"
+             + (f" on {', '.join(mm['channels'])}" if mm["channels"] else "")
+             + (f"; bands {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in mm['bands_hz'])}"
+                if mm["bands_hz"] else "")
+             + (f"; time {mm['time_s'][0]:.2f}-{mm['time_s'][1]:.2f} s" if mm["time_s"]
+                else "")
+             + f" (evidence {mm['evidence']['strength']})"]
+    if r["explanations"]:
+        for e in r["explanations"]:
+            ps = ", ".join(f"{k} {v['map']:.4g} [{v['hdi90'][0]:.4g}, {v['hdi90'][1]:.4g}] "
+                           f"{v['unit']}" for k, v in e["params"].items())
+            lines.append(f"explanation   : {e['effect']} at {e['location']}: {ps} "
+                         f"(log BF {e['score']:.1f})")
+    else:
+        lines.append("explanation   : none (no candidate physics is needed)")
+    fb, fa = r["fit"]["before"], r["fit"]["after"]
+    lines.append("NRMSE         : " + ", ".join(f"{c} {fb['nrmse'][c]:.4f} -> {fa['nrmse'][c]:.4f}"
+                                              for c in fb["nrmse"]))
+    lines.append("whiteness p   : " + ", ".join(
+        f"{c} {fb['whiteness_p'][c]:.2g} -> {fa['whiteness_p'][c]:.2g}" for c in fb["nrmse"]))
+    for n, v in r["parameters_before"].items():
+        a = r["parameters_after"][n]
+        lines.append(f"{n:<14}: {v['mean']:+.4f} [{v['hdi90'][0]:+.4f}, {v['hdi90'][1]:+.4f}]"
+                     f" -> {a['mean']:+.4f} [{a['hdi90'][0]:+.4f}, {a['hdi90'][1]:+.4f}]")
+    lines.append(r["summary"])
+    return "\n".join(lines)
+
+
+def run(args: argparse.Namespace) -> int:
+    rec = load_recording(args.recording)
+    priors = {}
+    if args.prior_file:
+        priors.update(load_prior_file(args.prior_file))
+    for text in args.prior:
+        name, pr = parse_prior_assignment(text)
+        priors[name] = pr
+    wanted = [e.strip() for e in args.effects.split(",") if e.strip()]
+    unknown = [e for e in wanted if e not in VOCABULARY]
+    if unknown or not wanted:
+        raise BayesAmbError(f"option --effects: unknown effect {unknown[0] if unknown else ''!r};"
+                            f" known: {', '.join(VOCABULARY)}")
+    if args.max_effects < 0:
+        raise BayesAmbError(f"option --max-effects: expected >= 0, got {args.max_effects}")
+    if args.steps < 10:
+        raise BayesAmbError(f"option --steps: value {args.steps} too small (>= 10)")
+    cands = tuple(c for c in all_candidates() if c.effect in wanted)
+    quiet = args.no_progress or args.json
+
+    def say(text: str) -> None:
+        if not quiet:
+            sys.stderr.write(f"  {text}\n")
+
+    d = diagnose(rec, args.params, priors, DiagnoseOptions(
+        log_bf_threshold=args.threshold, max_effects=args.max_effects, candidates=cands,
+        sample=args.sample, steps=args.steps, seed=args.seed, progress=say))
+    d.save(args.out)
+    report = to_jsonable(d.report)
+    emit(report, format_report(report) + f"\nwrote {args.out}/diagnosis.json, "
+         f"{args.out}/residuals.nc and {args.out}/models/", args.json)
+    return 0
