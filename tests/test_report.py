@@ -77,7 +77,12 @@ def bare(made, tmp_path_factory):
     summary["recording"] = "nowhere/missing.csv"
     (d / "summary.json").write_text(json.dumps(summary))
     (d / "diagnosis.json").write_text(json.dumps(
-        {"verdict": "actuator lag <b>suspected</b>", "effect": "actuator_lag", "score": 3.2}))
+        {"summary": "actuator lag <b>suspected</b>",
+         "mismatch": {"detected": True, "channels": ["Ax"], "bands_hz": [[100.0, 200.0]],
+                      "time_s": None, "evidence": {"strength": "strong"}},
+         "explanations": [{"effect": "actuator_lag", "location": "both", "score": 3.2,
+                           "params": {"bandwidth_hz": {"mean": 2500.0, "hdi90": [2400, 2600],
+                                                       "unit": "Hz"}}}]}))
     study = d.parent / "study"
     (study / "figures").mkdir(parents=True)
     from matplotlib.figure import Figure

@@ -79,7 +79,8 @@ def _grad(post: LogPosterior, x: NDArray, h: NDArray) -> tuple[float, NDArray]:
     pts = np.vstack([x, x + np.diag(h), x - np.diag(h)])
     v = post(pts)
     f = v[0]
-    g = (v[1:d + 1] - v[d + 1:]) / (2 * h)
+    with np.errstate(invalid="ignore"):              # -inf - -inf at a prior bound
+        g = (v[1:d + 1] - v[d + 1:]) / (2 * h)
     g[~np.isfinite(g)] = 0.0
     return f, g
 
@@ -208,11 +209,13 @@ def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
     v = post(pts)
     d = x.size
     f0 = float(v[0]) if np.isfinite(v[0]) else 0.0
-    curv = -(v[1:d + 1] - 2 * v[0] + v[d + 1:]) / h**2
+    with np.errstate(invalid="ignore", divide="ignore"):
+        curv = -(v[1:d + 1] - 2 * v[0] + v[d + 1:]) / h**2
+        inv_sqrt = 1.0 / np.sqrt(np.abs(curv))
     lo, hi = (np.array([np.nan if b is None else b for b in col], dtype=float)
               for col in zip(*post.bounds(), strict=True))
     width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-    scale = np.where(np.isfinite(curv) & (curv > 0), 1.0 / np.sqrt(np.abs(curv)), width)
+    scale = np.where(np.isfinite(curv) & (curv > 0), inv_sqrt, width)
     scale = np.clip(scale, 1e-9, width)
 
     def fun(u: NDArray) -> tuple[float, NDArray]:

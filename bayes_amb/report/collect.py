@@ -72,7 +72,8 @@ class RunData:
     ``summary`` is summary.json; ``posterior`` the DataTree of posterior.nc (None after a
     MAP-only run); ``recording`` the loaded recording (None when it cannot be found, with
     the reason in ``recording_note``); ``truth`` the simulated truth (None for real data);
-    ``diagnosis`` diagnosis.json (None when absent).
+    ``diagnosis`` diagnosis.json (None when absent) and ``diagnosis_residuals`` the
+    diagnosis's residuals.nc.
     """
 
     run_dir: Path
@@ -83,6 +84,7 @@ class RunData:
     recording_note: str = ""
     truth: dict[str, Any] | None = None
     diagnosis: dict[str, Any] | None = None
+    diagnosis_residuals: Any = None
     studies: tuple[StudyData, ...] = ()
     inputs: list[InputFile] = field(default_factory=list)
 
@@ -287,6 +289,14 @@ def collect_run(run_dir: str | Path, recording: str | Path | None = None,
     if (d / "diagnosis.json").is_file():
         run.diagnosis = _read_json(d / "diagnosis.json", "diagnosis")
         run.inputs.append(_input("model-discrepancy diagnosis", d / "diagnosis.json"))
+        if (d / "residuals.nc").is_file():
+            import xarray as xr
+            try:
+                run.diagnosis_residuals = xr.load_dataset(d / "residuals.nc")
+            except (OSError, ValueError) as exc:
+                raise ReportError(f"diagnosis residuals {d / 'residuals.nc'}: cannot be read "
+                                  f"({exc})") from None
+            run.inputs.append(_input("diagnosis residuals (NetCDF)", d / "residuals.nc"))
     _find_recording(run, recording)
     run.studies = tuple(_read_study(Path(s)) for s in studies)
     for st in run.studies:

@@ -19,6 +19,7 @@ from bayes_amb.control.robustness import SensitivityData
 from bayes_amb.inference.priors import parse_prior
 from bayes_amb.plots import control as pc
 from bayes_amb.plots import data as pd
+from bayes_amb.plots import discrepancy as pdisc
 from bayes_amb.plots import model as pm
 from bayes_amb.plots import posterior as pp
 from bayes_amb.plots.style import style_context
@@ -27,7 +28,8 @@ from bayes_amb.report.collect import RunData
 from bayes_amb.report.derived import Derived, ResidualTests, time_window, welch
 from bayes_amb.rotor import campbell_data
 
-__all__ = ["ReportFigure", "controller_figures", "data_figures", "file_figure",
+__all__ = ["ReportFigure", "controller_figures", "data_figures", "discrepancy_figures",
+           "file_figure",
            "identification_figures", "model_figures", "render_figure", "validation_figure"]
 
 
@@ -254,3 +256,38 @@ def validation_figure(tests: ResidualTests, port: str, dt: float) -> ReportFigur
         "Left: whiteness. The residual is expected to be coloured when noise or r1/r2 act "
         "(they reach ε through the loop, eq. 14), which the likelihood models. Right: the "
         "residual must not correlate with the excitation if the model is right.")
+
+
+def discrepancy_figures(diag: dict[str, Any], residuals: Any,
+                        truth: dict[str, float]) -> list[ReportFigure]:
+    """Figures of diagnosis.json and residuals.nc (when present)."""
+    figs = []
+    mm = diag.get("mismatch", {})
+    if residuals is not None:
+        figs.append(render_figure(
+            pdisc.plot_location(residuals, diag), "disc_location", "Where the model fails",
+            "Nominal fit: coherence of the residual with the excitation per band (the part "
+            "the excitation explains; circles: significant) and residual power over the "
+            "fitted noise floor. Shaded: the located bands."))
+        figs.append(render_figure(
+            pdisc.plot_residual_spectra(residuals, mm.get("bands_hz", [])), "disc_spectra",
+            "Residual spectra before and after",
+            "Welch spectra of ε and of the residual ε − ε̂ of the nominal model and of the "
+            "model with the named physics."))
+    if diag.get("explanations"):
+        figs.append(render_figure(
+            pdisc.plot_improvement(diag), "disc_gain", "Where the named physics helps",
+            "Log-likelihood gain of the chosen model over the nominal one per frequency "
+            "band; shaded: the bands holding 80 % of the gain."))
+    if diag.get("candidates"):
+        figs.append(render_figure(
+            pdisc.plot_candidates(diag), "disc_candidates", "Evidence per candidate",
+            "Bars: screening gain; diamonds: log Bayes factor of the candidates fitted "
+            "fully (values at or below 0.01 drawn at 0.01); dashed: acceptance threshold."))
+    if diag.get("parameters_before"):
+        figs.append(render_figure(
+            pdisc.plot_parameters(diag, truth), "disc_params",
+            "Stiffness and damping before and after",
+            "Mean and 90 % HDI with the nominal model and with the named physics; black: "
+            "the true value when the recording is simulated."))
+    return figs

@@ -1,0 +1,183 @@
+"""Figures of a model-discrepancy diagnosis: where the nominal model fails, which physics
+explains it, and the fit before and after.
+
+Inputs are the files a diagnosis leaves: diagnosis.json (as a dict) and residuals.nc (as an
+xarray Dataset); nothing is recomputed. Displacements in micrometres, frequencies in Hz.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import xarray as xr
+from matplotlib.figure import Figure
+
+from bayes_amb.plots.data import _grid
+from bayes_amb.plots.style import styled
+from bayes_amb.rig import CHANNELS
+
+_BEFORE, _AFTER, _DATA = "#d9541e", "#1f4e9a", "#9a9a9a"
+
+
+def _shade(ax: Any, bands: list[list[float]], color: str = "#f2c14e") -> None:
+    for lo, hi in bands:
+        ax.axvspan(max(lo, 1e-3), max(hi, lo * 1.02 + 1.0), color=color, alpha=0.3, lw=0)
+
+
+@styled
+def plot_location(ds: xr.Dataset, report: dict[str, Any]) -> Figure:
+    """Top: multiple coherence of the nominal residual with the excitation per band and
+    channel (markers where significant after Holm correction). Bottom: residual power over
+    the fitted noise floor per band. Shaded: the located bands."""
+    fig, axes = _grid(2, 1, (8.0, 5.6), sharex=True)
+    f = np.sqrt(ds["band_lo_hz"].values * ds["band_hi_hz"].values)
+    mm = report["mismatch"]
+    sig = {(x["band_hz"][0], c) for x in mm.get("findings", [])
+           if x["test"] == "coherence" for c in x["channels"]}
+    lo = ds["band_lo_hz"].values
+    for j, ch in enumerate(CHANNELS):
+        coh = ds["coherence"].values[:, j]
+        line, = axes[0, 0].semilogx(f, coh, marker=".", lw=1.0, label=ch)
+        hit = [i for i in range(f.size) if (float(lo[i]), ch) in sig]
+        axes[0, 0].plot(f[hit], coh[hit], "o", ms=7, mfc="none", color=line.get_color())
+        axes[1, 0].semilogx(f, ds["floor_ratio"].values[:, j], marker=".", lw=1.0, label=ch)
+    for ax in axes[:, 0]:
+        _shade(ax, mm.get("bands_hz", []))
+    axes[0, 0].set_ylabel("coherence with excitation")
+    axes[0, 0].set_title("Nominal residual: part explained by the excitation "
+                         "(circles: significant, family-wise 1 %)")
+    axes[1, 0].axhline(1.0, color="k", lw=0.8, ls="--")
+    axes[1, 0].set_ylabel("residual power / noise floor")
+    axes[1, 0].set_xlabel("frequency (Hz)")
+    axes[0, 0].legend(ncols=4, fontsize=8, loc="upper right")
+    return fig
+
+
+@styled
+def plot_residual_spectra(ds: xr.Dataset, bands: list[list[float]] | None = None) -> Figure:
+    """Welch spectra per channel: eps (grey), residual of the nominal model (orange) and of
+    the model with the named physics (blue)."""
+    fig, axes = _grid(2, 2, (8.0, 5.6), sharex=True)
+    f = ds["freq"].values
+    keep = f > 0
+    for j, ch in enumerate(CHANNELS):
+        ax = axes[j // 2, j % 2]
+        ax.loglog(f[keep], 1e12 * ds["psd_eps"].values[keep, j], color=_DATA, lw=0.8,
+                  label="ε")
+        ax.loglog(f[keep], 1e12 * ds["psd_before"].values[keep, j], color=_BEFORE, lw=1.0,
+                  label="residual, nominal")
+        ax.loglog(f[keep], 1e12 * ds["psd_after"].values[keep, j], color=_AFTER, lw=1.0,
+                  ls="--", label="residual, with named physics")
+        _shade(ax, bands or [])
+        ax.set_title(ch)
+        if j % 2 == 0:
+            ax.set_ylabel("PSD (µm²/Hz)")
+        if j >= 2:
+            ax.set_xlabel("frequency (Hz)")
+    axes[0, 0].legend(fontsize=7, loc="lower left")
+    return fig
+
+
+@styled
+def plot_candidates(report: dict[str, Any]) -> Figure:
+    """Evidence per candidate and round: screening gain (all) and log Bayes factor (fitted
+    ones), with the acceptance threshold."""
+    rows = report["candidates"]
+    rounds = sorted({r["round"] for r in rows})
+    fig, axes = _grid(1, len(rounds), (4.2 * len(rounds), 4.4), sharey=False)
+    thr = float(report.get("criterion", "3").split()[-1]) if report.get("criterion") else 3.0
+    accepted = {(e["effect"], e["location"]) for e in report["explanations"]}
+    for k, rnd in enumerate(rounds):
+        ax = axes[0, k]
+        rs = [r for r in rows if r["round"] == rnd]
+        labels = [f"{r['effect']}@{r['location']}" for r in rs]
+        gain = [max(r["screen_gain"] or 0.0, 1e-2) for r in rs]
+        y = np.arange(len(rs))
+        ax.barh(y, gain, color="#cfd8e3", label="screening gain (nats)")
+        bf = [(i, r["log_bayes_factor"]) for i, r in enumerate(rs)
+              if r["log_bayes_factor"] is not None]
+        for i, v in bf:
+            acc = (rs[i]["effect"], rs[i]["location"]) in accepted
+            ax.plot(max(v, 1e-2), i, "D", color=_AFTER if acc else _BEFORE, ms=6)
+        ax.axvline(thr, color="k", ls="--", lw=0.8)
+        ax.set_xscale("log")
+        ax.set_yticks(y, labels, fontsize=7)
+        ax.invert_yaxis()
+        ax.set_title(f"round {rnd}")
+        ax.set_xlabel("nats (log scale)")
+    axes[0, 0].plot([], [], "D", color=_AFTER, label="log BF, accepted")
+    axes[0, 0].plot([], [], "D", color=_BEFORE, label="log BF, rejected")
+    axes[0, 0].legend(fontsize=7, loc="lower right")
+    return fig
+
+
+@styled
+def plot_improvement(report: dict[str, Any]) -> Figure:
+    """Log-likelihood gain of the chosen model over the nominal one, per likelihood band."""
+    gb = np.array(report["mismatch"].get("improvement", {}).get("gain_by_band", []))
+    fig, axes = _grid(1, 1, (8.0, 3.2))
+    ax = axes[0, 0]
+    if gb.size:
+        f = np.sqrt(np.maximum(gb[:, 0], 1e-3) * np.maximum(gb[:, 1], 1e-3))
+        ax.semilogx(f, gb[:, 2], drawstyle="steps-mid", color=_AFTER)
+        ax.axhline(0, color="k", lw=0.6)
+        _shade(ax, report["mismatch"]["improvement"]["bands_hz"])
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("log-likelihood gain per band")
+    ax.set_title("Where the named physics improves the fit")
+    return fig
+
+
+@styled
+def plot_parameters(report: dict[str, Any], truth: dict[str, float] | None = None) -> Figure:
+    """Stiffness/damping estimates (mean and 90 % HDI) before and after, true values when
+    known."""
+    pb, pa = report["parameters_before"], report["parameters_after"]
+    names = list(pb)
+    fig, axes = _grid(1, 1, (6.0, 0.8 + 0.7 * len(names)))
+    ax = axes[0, 0]
+    for i, n in enumerate(names):
+        for off, src, col, lab in ((-0.12, pb, _BEFORE, "nominal model"),
+                                   (0.12, pa, _AFTER, "with named physics")):
+            lo, hi = src[n]["hdi90"]
+            ax.plot([lo, hi], [i + off, i + off], color=col, lw=2.5,
+                    label=lab if i == 0 else None)
+            ax.plot(src[n]["mean"], i + off, "o", color=col)
+        if truth and n in truth:
+            ax.plot(truth[n], i, "k|", ms=18, mew=2, label="true" if i == 0 else None)
+    ax.set_yticks(range(len(names)), names)
+    ax.invert_yaxis()
+    ax.set_xlabel("θ (dimensionless); bars: 90 % HDI")
+    ax.legend(fontsize=8, loc="best")
+    return fig
+
+
+@styled
+def plot_benchmark(table: dict[str, Any]) -> Figure:
+    """Concealed-effect benchmark: per case, the share of recordings where the hidden
+    effect(s) were named (controls: where nothing was named), with the targets."""
+    cases = list(table["per_case"])
+    vals, n = [], []
+    for c in cases:
+        v = table["per_case"][c]
+        ok = v["n"] - v["false_names"] if c == "none" else v["right_named"]
+        vals.append(ok / v["n"] if v["n"] else np.nan)
+        n.append(v["n"])
+    fig, axes = _grid(1, 1, (8.0, 3.8))
+    ax = axes[0, 0]
+    x = np.arange(len(cases))
+    colors = ["#7a7a7a" if c == "none" else "#1f4e9a" if "+" not in c else "#6a3d9a"
+              for c in cases]
+    ax.bar(x, vals, color=colors)
+    for i, (v, k) in enumerate(zip(vals, n, strict=True)):
+        ax.text(i, min(v, 1.0) + 0.02, f"{v:.0%}\nn={k}", ha="center", fontsize=7)
+    for goal, ls in ((0.9, "--"), (0.7, ":")):
+        ax.axhline(goal, color="k", lw=0.8, ls=ls)
+    ax.set_xticks(x, [c.replace("+", "+\n") for c in cases], fontsize=7, rotation=30,
+                  ha="right")
+    ax.set_ylim(0, 1.15)
+    ax.set_ylabel("share correct")
+    ax.set_title("Hidden effect named (controls: nothing named); targets 90 % (--), "
+                 "pairs 70 % (:)")
+    return fig
