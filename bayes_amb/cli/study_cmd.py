@@ -42,7 +42,8 @@ def run(args: argparse.Namespace) -> int:
         manifest["figures"] = [str(p) for p in study_figures(spec, args.out)]
     d = {"study": spec.name, "out": args.out, "rows": len(rows),
          "failures": manifest["failures"], "conclusions": manifest["conclusions"],
-         "sbc": manifest.get("sbc"), "benchmark": manifest.get("benchmark"), "figures": manifest.get("figures", [])}
+         "sbc": manifest.get("sbc"), "benchmark": manifest.get("benchmark"),
+         "figures": manifest.get("figures", [])}
     text = [f"study '{spec.name}': {len(rows)} replicates ({manifest['failures']} failed), "
             f"results in {args.out}/"]
     text += [f"  - {c}" for c in manifest["conclusions"]]

@@ -19,7 +19,7 @@ from bayes_amb.discrepancy.candidates import (
     all_candidates,
 )
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
-from bayes_amb.discrepancy.locate import Location, LocateOptions, locate
+from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
 
 __all__ = ["VOCABULARY", "ActuatorLag", "Candidate", "CrossCoupling", "DiagnoseOptions",
            "Diagnosis", "FlexibleMode", "LocateOptions", "Location", "SensorGain", "TimeDelay",

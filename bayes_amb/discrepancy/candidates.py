@@ -147,7 +147,8 @@ class ActuatorLag(Candidate):
         """Exact sampling with the lag (no stiff matrix exponential): within a sample the
         force of a lagged coil is f(t) = u + (x_l - u) e^{-t/tau}, so
 
-            x+   = Ad x + Gamma u + J (x_l - u)_lagged,   x_l+ = e^{-dt/tau} x_l + (1 - e^{-dt/tau}) u
+            x+   = Ad x + Gamma u + J (x_l - u)_lagged
+            x_l+ = e^{-dt/tau} x_l + (1 - e^{-dt/tau}) u_lagged
             J    = e^{A dt} (A + I/tau)^-1 (I - e^{-dt/tau} e^{-A dt}) B_lagged,
 
         which tends to the plain ZOH as tau -> 0."""
@@ -328,8 +329,13 @@ class FlexibleMode(Candidate):
 @dataclass(frozen=True)
 class Unbalance(Candidate):
     """Synchronous forcing at the running speed by an unbalance u e^{j phase} (kg m) at a
-    disc: f_x = u Omega^2 cos(Omega t + phase), f_y = u Omega^2 sin(Omega t + phase).
-    Sampled: a = u cos(phase), b = u sin(phase) in units of 1e-5 kg m (null 0, 0)."""
+    disc: f_x = u Omega^2 cos(Omega t + phase), f_y = u Omega^2 sin(Omega t + phase), phase
+    at t = 0. Sampled: a = u cos(phase), b = u sin(phase) in units of 1e-5 kg m (null 0)."""
+
+    start: str = "rest"
+    """How the record begins: "rest" (the forcing starts with the record, as when the loop
+    is closed at t = 0) or "steady" (the rotor was already spinning: no start transient).
+    The diagnosis fits both and keeps the better."""
 
     fingerprint = ("a line at 1x the running speed that does not depend on the excitation, "
                    "strongest on the channels near the disc")

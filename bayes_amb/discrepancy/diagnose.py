@@ -32,8 +32,15 @@ from bayes_amb.discrepancy.fitstats import (
     residual_spectrum,
     theta_summary,
 )
-from bayes_amb.discrepancy.locate import Location, LocateOptions, locate, merge_spans
-from bayes_amb.discrepancy.select import FittedModel, Selection, SelectOptions, fit_nominal, select
+from bayes_amb.discrepancy.locate import LocateOptions, Location, locate, merge_spans
+from bayes_amb.discrepancy.select import (
+    FittedModel,
+    Selection,
+    SelectOptions,
+    fit_nominal,
+    own_noise_fit,
+    select,
+)
 from bayes_amb.discrepancy.story import plain_language
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.forward import ForwardModel
@@ -188,6 +195,9 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] = "
     sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
                             max_effects=opt.max_effects, candidates=opt.candidates)
     sel = select(nominal, sel_opt, priors, progress=say)
+    if sel.accepted:
+        say("refitting the chosen model with its own noise filters")
+        sel.final = sel.accepted[-1] = own_noise_fit(sel.final)
     if opt.sample:
         for i, fm in enumerate({id(m): m for m in (nominal, sel.final)}.values()):
             say(f"sampling the posterior of model {i + 1}")

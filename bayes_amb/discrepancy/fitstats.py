@@ -15,9 +15,9 @@ from scipy.signal import welch
 
 from bayes_amb.discrepancy.locate import (
     ljung_box,
-    whitened_series,
     noise_cholesky,
     whiten,
+    whitened_series,
 )
 from bayes_amb.discrepancy.select import FittedModel
 from bayes_amb.rig import CHANNELS

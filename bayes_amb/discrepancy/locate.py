@@ -25,6 +25,7 @@ raise no alarm in 99 % of cases when the model holds.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -104,7 +105,7 @@ def locate_bands(k: NDArray, n: int, dt: float, n_bands: int, min_bins: int) -> 
     edges = np.geomspace(max(f[0], 1.0 / (n * dt)), f[-1] * (1 + 1e-9), n_bands + 1)
     bands: list[NDArray] = []
     cur: list[int] = []
-    for lo, hi in zip(edges[:-1], edges[1:], strict=True):
+    for lo, hi in itertools.pairwise(edges):
         cur += list(np.flatnonzero((f >= lo) & (f < hi)))
         if len(cur) >= min_bins:
             bands.append(np.array(cur))
@@ -234,7 +235,8 @@ def _ppc(like: RobustWhittle, P_hat: NDArray, cov: NDArray | None, L: NDArray,
     ok = mb.stable[1:]
     t_coh, t_pow = [], []
     for j in np.flatnonzero(ok):
-        w = (rng.normal(size=(like.z.size, 4)) + 1j * rng.normal(size=(like.z.size, 4))) / np.sqrt(2)
+        w = (rng.normal(size=(like.z.size, 4))
+             + 1j * rng.normal(size=(like.z.size, 4))) / np.sqrt(2)
         R = (Y[0] - Y[j + 1]) + (L @ w[..., None])[..., 0]
         _, pc = _coherence(R, like.X, bands)
         t_coh.append(-np.log10(max(pc.min(), 1e-300)))

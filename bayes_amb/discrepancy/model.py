@@ -214,36 +214,37 @@ class ExtendedForwardModel(ForwardModel):
 
     # ------------------------------------------------------------------ lines
     def line_responses(self, P_ref: NDArray) -> list[NDArray]:
-        """For each line candidate, the eps response from rest (N, 4, 2) to its two basis
-        forces per unit of its parameters (a: cos, b: sin phase), at the parameters P_ref.
+        """For each line candidate, the eps response (N, 4, 2) to its two basis forces per
+        unit of its parameters (a: cos, b: sin phase) through the loop of this model at
+        the parameters P_ref (so a lag, delay or gain of the same model acts on it too).
 
-        The loop is the nominal-structure loop at theta_ref (the force path does not see
-        the other candidates' small changes); the force is sampled and held (ZOH).
+        The force acts on the mechanical states only (not through lag or delay states)
+        and is sampled and held (ZOH).
         """
         out = []
         if not self.line_candidates:
             return out
-        th = np.atleast_2d(np.asarray(P_ref, dtype=float))[:, :len(self.theta_names)]
-        A0 = self.plant.A + (self.plant.B_w * np.repeat(
-            np.concatenate([th[0], np.zeros(len(self._lft_index) - th.shape[1])]),
-            self.plant.blocks)) @ self.plant.C_z
-        n = A0.shape[0]
+        P = np.atleast_2d(np.asarray(P_ref, dtype=float))[:1]
+        A, _, _ = self.continuous_plants(P)
+        Ad, Bd, Cd = self.sampled_plants(P)
+        n = A.shape[1]
         t = np.arange(self.x.shape[0])
         w = self.ctx.omega_rot
         z0 = np.exp(1j * w * self.dt)
+        A_cl, _, C_cl, _ = loop_matrices(self.parts, Ad, Bd, Cd)
+        A_cl, C_cl = A_cl[0], C_cl[0]
+        lam, V = np.linalg.eig(A_cl)
+        cm = C_cl @ V                                                  # (4, ns)
         for c in self.line_candidates:
             Bf = self.base.T_L @ c.line_force(self.ctx)
-            Ad, G = zoh(A0, np.hstack([self.plant.B, Bf]), self.dt)
-            Bd, Bfd = G[:, :4], G[:, 4:]
-            A_cl, _, C_cl, _ = loop_matrices(self.parts, Ad[None], Bd[None], self.plant.C)
-            A_cl, C_cl = A_cl[0], C_cl[0]
+            _, Bfd = zoh(A[0], Bf, self.dt)
             Bcl = np.zeros((A_cl.shape[0], 2))
-            Bcl[:n] = Bfd
-            lam, V = np.linalg.eig(A_cl)
-            bm = np.linalg.solve(V, Bcl.astype(complex))              # (ns, 2)
-            cm = C_cl @ V                                              # (4, ns)
-            # response from rest to f[k] = F z0^k:  sum_i c_i b_i (lam_i^k - z0^k)/(lam_i - z0)
-            lk = lam[None, :] ** t[:, None]                            # (N, ns)
+            Bcl[:n] = Bfd                                              # plant states first
+            bm = np.linalg.solve(V, Bcl.astype(complex))               # (ns, 2)
+            # response from rest to f[k] = F z0^k:  sum_i c_i b_i (lam_i^k - z0^k)/(lam_i - z0);
+            # in steady state (forcing since long before the record) the lam^k term is absent
+            lk = (lam[None, :] ** t[:, None] if c.start == "rest"
+                  else np.zeros((t.size, lam.size)))
             g = (lk - (z0 ** t)[:, None]) / (lam - z0)[None, :]
             F = w**2 * c.UNIT * np.array([1.0, -1j])                   # a = 1: x cos, y sin
             resp = (g * (bm @ F)[None, :]) @ cm.T                      # (N, 4) complex

@@ -125,6 +125,10 @@ def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
                 fig = plot_factor(summary, factor, n)
                 paths.append(save_figure(fig, figdir / f"{factor}_{n}.png"))
         manifest = json.loads((out / "study.json").read_text(encoding="utf-8"))
+        if manifest.get("benchmark"):
+            from bayes_amb.plots.discrepancy import plot_benchmark
+            paths.append(save_figure(plot_benchmark(manifest["benchmark"]),
+                                     figdir / "benchmark.png"))
         if manifest.get("sbc"):
             paths.append(save_figure(plot_sbc_ranks(manifest["sbc"]), figdir / "sbc_ranks.png"))
     return paths

@@ -345,6 +345,20 @@ def studies_section(run: RunData) -> Section:
                               f"{st.n_rows if st.n_rows is not None else '?'} replicates, "
                               f"seed {st.seed}.")
         sec.bullets += [f"{st.name}: {c}" for c in st.conclusions]
+        if st.summary_rows and "case" in st.summary_rows[0]:
+            sec.tables.append(Table(
+                f"Study {st.name}: result table", [
+                    "case", "recordings", "hidden effect(s) named", "nothing else named",
+                    "wrong names", "parameter in 90 % HDI", "located right",
+                    "concealment (max)"],
+                [[r["case"], r["n"], r["right_named"] if r["case"] != "none" else "–",
+                  r["exact"], r["false_names"],
+                  f"{r['covered']}/{r['checked']}" if r["case"] != "none" else "–",
+                  r["located"] if r["case"] != "none" else "–",
+                  g(float(r["concealment_max"]), 2)] for r in st.summary_rows],
+                "Concealment: RMS of the hidden effect's contribution to the displacements "
+                "over the RMS of the noise contribution, worst channel (below 1: hidden in "
+                "the noise)."))
         sec.figures += [fg.file_figure(p, f"study_{st.name}_{p.stem}",
                                        f"Study {st.name}: {p.stem.replace('_', ' ')}",
                                        f"From {p.name} of the study folder.")
