@@ -259,9 +259,21 @@ def bench_map(quick: bool = False) -> MapBench:
                     eval_ratio=nm.n_evals / lb.n_evals)
 
 
+def bench_study(quick: bool = False) -> Result:
+    """Study throughput (bayes_amb.bench.study_case): the 1000-replicate MAP + Laplace
+    noise sweep of the paper's case through run_study on 2 workers (quick: 20)."""
+    from bayes_amb.bench.study_case import bench_study_throughput
+
+    return bench_study_throughput(20 if quick else 1000, workers=2)
+
+
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
-    "simulate": bench_simulate, "map": bench_map}
+    "simulate": bench_simulate, "map": bench_map, "study": bench_study}
+
+DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
+"""What ``bayes-amb bench`` runs without --only (the study sweep takes minutes: ask for it
+with --only study)."""
 
 
 def run_benchmarks(names: list[str] | tuple[str, ...] | None = None, quick: bool = False
@@ -271,7 +283,7 @@ def run_benchmarks(names: list[str] | tuple[str, ...] | None = None, quick: bool
     Parameters
     ----------
     names : sequence of str, optional
-        Names from BENCHMARKS (default: all).
+        Names from BENCHMARKS (default: DEFAULT_BENCHMARKS).
     quick : bool
         Passed to each benchmark.
 
@@ -285,7 +297,7 @@ def run_benchmarks(names: list[str] | tuple[str, ...] | None = None, quick: bool
     BayesAmbError
         For an unknown benchmark name.
     """
-    names = list(BENCHMARKS) if not names else list(names)
+    names = list(DEFAULT_BENCHMARKS) if not names else list(names)
     unknown = [n for n in names if n not in BENCHMARKS]
     if unknown:
         raise BayesAmbError(f"option --only: unknown benchmark {unknown[0]!r}; known: "

@@ -6,7 +6,7 @@ import argparse
 import sys
 from typing import Any
 
-from bayes_amb.bench import BENCHMARKS, report, run_benchmarks
+from bayes_amb.bench import BENCHMARKS, DEFAULT_BENCHMARKS, report, run_benchmarks
 from bayes_amb.cli.common import emit
 from bayes_amb.errors import BayesAmbError
 
@@ -15,10 +15,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("bench", help="run the benchmarks (ratios against baselines)",
                        description="Time the fast paths against their baselines in the same "
                        "process and print both and the ratio (speedup = baseline / ours). "
-                       "Benchmarks: " + ", ".join(BENCHMARKS) + ". The full set takes about "
-                       "1.5 minutes; set OPENBLAS_NUM_THREADS=1 for comparable figures.")
+                       "Benchmarks: " + ", ".join(BENCHMARKS) + ". The default set ("
+                       + ", ".join(DEFAULT_BENCHMARKS) + ") takes about 1.5 minutes; "
+                       "'--only study' (1000-replicate study throughput) about 5. Set "
+                       "OPENBLAS_NUM_THREADS=1 for comparable figures.")
     p.add_argument("--only", default=None, metavar="NAME,...",
-                   help="comma-separated benchmarks to run (default: all)")
+                   help="comma-separated benchmarks to run (default: all but study)")
     p.add_argument("--quick", action="store_true",
                    help="smoke-test sizes (seconds; the figures are not representative)")
     p.add_argument("--json", action="store_true", help="print JSON")
@@ -26,9 +28,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def selected(only: str | None) -> list[str]:
-    """Benchmark names of --only in BENCHMARKS order (all when None)."""
+    """Benchmark names of --only in BENCHMARKS order (the default set when None)."""
     if only is None:
-        return list(BENCHMARKS)
+        return list(DEFAULT_BENCHMARKS)
     names = [n.strip() for n in only.split(",") if n.strip()]
     unknown = [n for n in names if n not in BENCHMARKS]
     if unknown or not names:
@@ -66,6 +68,11 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         rows.append(("map", f"{lb['wall_s']:.2f} s, {lb['n_evals']} evals",
                      f"{nm['wall_s']:.2f} s, {nm['n_evals']} evals",
                      f"{d['map']['speedup']:.1f}x"))
+    if "study" in d:
+        r = d["study"]
+        rows.append(("study", f"{r['n_replicates']} replicates in {r['wall_s']:.0f} s "
+                     f"({r['workers']} workers)", "(no baseline)",
+                     f"{r['s_per_1000'] / 60:.1f} min/1000"))
     return rows
 
 

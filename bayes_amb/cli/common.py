@@ -34,3 +34,21 @@ def emit(data: dict[str, Any], text: str, as_json: bool) -> None:
         sys.stdout.write(json.dumps(to_jsonable(data), indent=2) + "\n")
     else:
         sys.stdout.write(text.rstrip() + "\n")
+
+
+def add_prior_options(p: Any) -> None:
+    """--prior NAME=kind(a,b) (repeatable) and --prior-file FILE."""
+    p.add_argument("--prior", action="append", default=[], metavar="NAME=kind(a,b)",
+                   help="prior, e.g. k_By=uniform(-0.9,0.9) (repeatable)")
+    p.add_argument("--prior-file", default=None, help="TOML file with a [priors] table")
+
+
+def read_priors(args: Any) -> dict[str, Any]:
+    """The priors of --prior-file, then --prior (which wins)."""
+    from bayes_amb.inference.priors import load_prior_file, parse_prior_assignment
+
+    priors = dict(load_prior_file(args.prior_file)) if args.prior_file else {}
+    for text in args.prior:
+        name, pr = parse_prior_assignment(text)
+        priors[name] = pr
+    return priors

@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
 from bayes_amb.discrepancy import VOCABULARY, DiagnoseOptions, all_candidates, diagnose
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference.priors import load_prior_file, parse_prior_assignment
 from bayes_amb.io.recording import load_recording
 
 
@@ -22,9 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recording", metavar="NAME.csv")
     p.add_argument("--params", default="k_By,c_By",
                    help="stiffness/damping parameters kept in every model (default k_By,c_By)")
-    p.add_argument("--prior", action="append", default=[], metavar="NAME=kind(a,b)",
-                   help="prior of a stiffness/damping parameter (repeatable)")
-    p.add_argument("--prior-file", default=None, help="TOML file with a [priors] table")
+    add_prior_options(p)
     p.add_argument("--effects", default=",".join(VOCABULARY),
                    help="effects to try (comma-separated; default all)")
     p.add_argument("--threshold", type=float, default=3.0,
@@ -73,12 +70,7 @@ def format_report(r: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     rec = load_recording(args.recording)
-    priors = {}
-    if args.prior_file:
-        priors.update(load_prior_file(args.prior_file))
-    for text in args.prior:
-        name, pr = parse_prior_assignment(text)
-        priors[name] = pr
+    priors = read_priors(args)
     wanted = [e.strip() for e in args.effects.split(",") if e.strip()]
     unknown = [e for e in wanted if e not in VOCABULARY]
     if unknown or not wanted:

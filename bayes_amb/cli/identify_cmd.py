@@ -5,10 +5,9 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.identify import IdentifyOptions, identify
-from bayes_amb.inference.priors import load_prior_file, parse_prior_assignment
 from bayes_amb.io.recording import load_recording
 
 
@@ -19,9 +18,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "RUN_DIR/posterior.nc and RUN_DIR/summary.json.")
     p.add_argument("recording", metavar="NAME.csv")
     p.add_argument("--params", required=True, help="comma-separated names, e.g. k_By,c_By")
-    p.add_argument("--prior", action="append", default=[], metavar="NAME=kind(a,b)",
-                   help="prior, e.g. k_By=uniform(-0.9,0.9) (repeatable)")
-    p.add_argument("--prior-file", default=None, help="TOML file with a [priors] table")
+    add_prior_options(p)
     p.add_argument("--walkers", type=int, default=None)
     g = p.add_mutually_exclusive_group()
     g.add_argument("--steps", type=int, default=None, help="fixed number of steps")
@@ -74,12 +71,7 @@ def format_summary(s: dict) -> str:
 
 def run(args: argparse.Namespace) -> int:
     rec = load_recording(args.recording)
-    priors = {}
-    if args.prior_file:
-        priors.update(load_prior_file(args.prior_file))
-    for text in args.prior:
-        name, pr = parse_prior_assignment(text)
-        priors[name] = pr
+    priors = read_priors(args)
     if args.walkers is not None and args.walkers < 4:
         raise BayesAmbError(f"option --walkers: value {args.walkers} too small")
     if args.steps is not None and args.steps < 10:
