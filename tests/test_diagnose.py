@@ -140,3 +140,18 @@ def test_cli_diagnose_bad_input(ctrl, tmp_path, capsys, argv, needle):
     code, _, err = run_cli(["diagnose", str(csv_path), "--out", str(tmp_path / "o"), *argv],
                            capsys)
     assert code == 2 and needle in err and len(err.strip().splitlines()) == 1
+
+
+def test_sampled_posteriors_are_saved_as_emcee_draws(ctrl, tmp_path):
+    import xarray as xr
+
+    rec, _ = _rec(ctrl, ["sensor_gain:gain=0.05,channel=Ay"], seed=14, duration=0.1)
+    d = diagnose(rec, "k_By", options=DiagnoseOptions(
+        candidates=tuple(c for c in all_candidates() if c.effect == "sensor_gain"),
+        sample=True, steps=60))
+    out = d.save(tmp_path / "diag")
+    assert d.report["inference"] == "emcee"
+    for f in (out / "models").glob("*.nc"):
+        ds = xr.load_dataset(f)
+        assert ds.attrs["inference"] == "emcee" and ds.sizes["draw"] > 100
+        assert np.all(np.isfinite(ds["k_By"].values))

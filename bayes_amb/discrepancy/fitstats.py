@@ -63,15 +63,19 @@ def theta_summary(fitted: FittedModel, samples: NDArray,
     """Stiffness/damping parameters: mean, sd, hdi90 and the same in physical units."""
     rig = fitted.forward.recording.rig
     out: dict[str, dict[str, Any]] = {}
+    bounds = fitted.post.bounds()
     for j, name in enumerate(fitted.forward.theta_names):
         spec = get_spec(name)
+        lo_b, hi_b = bounds[j]
         scale = spec.physical_scale(rig)
         v = samples[:, j]
         lo, hi = hdi(v)
         out[name] = {"map": float(fitted.params[j]), "mean": float(np.mean(v)),
                      "sd": float(np.std(v)), "hdi90": [lo, hi], "unit": spec.unit,
                      "physical_mean": float(np.mean(v)) * scale,
-                     "physical_hdi90": sorted([lo * scale, hi * scale])}
+                     "physical_hdi90": sorted([lo * scale, hi * scale]),
+                     "at_prior_bound": bool(any(b is not None and abs(fitted.params[j] - b)
+                                                < 1e-6 for b in (lo_b, hi_b)))}
         if truth is not None and name in truth:
             out[name]["true"] = truth[name]
     return out

@@ -65,6 +65,11 @@ def plain_language(report: dict[str, Any]) -> str:
         if moved:
             text.append("Estimates that moved by more than their sd once the physics was "
                         f"added: {', '.join(moved)}.")
+        bound = [n for n in pb if pb[n].get("at_prior_bound") and not
+                 pa[n].get("at_prior_bound")]
+        if bound:
+            text.append(f"With the nominal model {', '.join(bound)} sat on its prior bound, "
+                        "absorbing the missing physics; with it added it no longer does.")
     else:
         text.append("None of the candidate physics (actuator lag, time delay, cross-coupling, "
                     "flexible modes, unbalance, sensor gain) explains it: the model is wrong "

@@ -321,8 +321,12 @@ def discrepancy_section(run: RunData) -> Section:
         tables.append(Table("Stiffness and damping before and after", [
             "parameter", "before: mean", "before: 90 % HDI", "after: mean", "after: 90 % HDI",
             "true"],
-            [[n, g(pb[n]["mean"]), _hdi(pb[n]), g(pa[n]["mean"]), _hdi(pa[n]),
-              g(truth.get(n)) if n in truth else "–"] for n in pb]))
+            [[n, g(pb[n]["mean"]) + (" (prior bound)" if pb[n].get("at_prior_bound") else ""),
+              _hdi(pb[n]), g(pa[n]["mean"])
+              + (" (prior bound)" if pa[n].get("at_prior_bound") else ""), _hdi(pa[n]),
+              g(truth.get(n)) if n in truth else "–"] for n in pb],
+            "A MAP on a prior bound means the data pushed the parameter against its range: "
+            "with the nominal model it often absorbs the missing physics."))
     cands = dg.get("candidates", [])
     if cands:
         tables.append(Table("Every candidate tried", [
