@@ -225,7 +225,7 @@ def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
     ubounds = [(None if np.isnan(a) else (a - xi) / si, None if np.isnan(b) else (b - xi) / si)
                for a, b, xi, si in zip(lo, hi, x, scale, strict=True)]
     res = so.minimize(fun, np.zeros(d), jac=True, method="L-BFGS-B", bounds=ubounds,
-                      options={"maxiter": maxiter, "ftol": 1e-12, "gtol": 1e-6})
+                      options={"maxiter": maxiter, "ftol": 1e-10, "gtol": 1e-5})
     return x + scale * res.x, bool(res.success)
 
 
@@ -265,7 +265,7 @@ def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = Non
         # sigma_r1 would be invisible to the start and stuck wherever it began
         post.likelihood.set_noise_reference(theta_ls)
         starts = _starts(post, theta_ls, n_random_starts, seed)
-        short = [local_search(post, method, s, maxiter=40)[0] for s in starts]
+        short = [local_search(post, method, s, maxiter=15)[0] for s in starts]
         vals = post(np.array(short))
         x = short[int(np.argmax(vals))]
     else:
