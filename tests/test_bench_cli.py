@@ -112,3 +112,12 @@ def test_text_table_shows_missing_diagnostics_as_dash(bench_json):
     data["posterior"]["parameters"][0]["r_hat"] = None
     line = next(ln for ln in format_text(data).splitlines() if ln.startswith("posterior:"))
     assert "max R-hat -," in line
+
+
+def test_study_throughput_row(bench_json):
+    """The opt-in study benchmark is not in the default set; its row reads per 1000."""
+    assert "study" not in bench_json
+    data = dict(bench_json, study={"n_replicates": 1000, "wall_s": 480.0, "workers": 2,
+                                   "s_per_1000": 480.0})
+    row = next(ln for ln in format_text(data).splitlines() if ln.startswith("study"))
+    assert "1000 replicates in 480 s" in row and "8.0 min/1000" in row
