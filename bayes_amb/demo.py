@@ -91,7 +91,10 @@ def _diagnose(run_dir: Path, csv: Path, params: str, seed: int) -> tuple[str, li
     d = diagnose(load_recording(csv), params, options=DiagnoseOptions(seed=seed))
     d.save(run_dir)
     named = [f"{e['description']} (log BF {e['score']:.0f})" for e in d.report["explanations"]]
-    return ("; ".join(named) if named else "no effect named"), d.effects
+    after = ", ".join(f"{n} {v['mean']:+.4f} [{v['hdi90'][0]:+.4f}, {v['hdi90'][1]:+.4f}]"
+                      for n, v in d.report["parameters_after"].items())
+    text = "; ".join(named) if named else "no effect named"
+    return (text + (f"; with it in the model: {after}" if named else "")), d.effects
 
 
 def run_demo(out_dir: str | Path = "reports/demo", config: DemoConfig | None = None,

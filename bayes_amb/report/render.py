@@ -213,6 +213,17 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
                        "no sign of model error at this noise level.")
     elif "rt" in facts:
         bullets.append("S(θ̂) x reproduces the data to round-off (noise-free data).")
+    dg = run.diagnosis or {}
+    if dg.get("explanations") or dg.get("mismatch"):
+        named = "; ".join(str(e.get("description", e.get("effect", "?")))
+                          for e in dg.get("explanations", []))
+        after = dg.get("parameters_after", {})
+        moved = ", ".join(f"{n} {v['mean']:+.3f} (90 % HDI {v['hdi90'][0]:+.3f} to "
+                          f"{v['hdi90'][1]:+.3f})" for n, v in after.items())
+        bullets.append(("Model discrepancy: " + named + "." if named else
+                        "Model discrepancy: no missing physics named.")
+                       + (f" With it in the model: {moved}." if named and moved else "")
+                       + " (See Model discrepancy.)")
     if run.recording_note:
         bullets.append(f"Note: {run.recording_note}.")
     return Section("summary", SECTION_TITLES["summary"], bullets=bullets)
