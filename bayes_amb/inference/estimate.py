@@ -184,9 +184,42 @@ def _initial_point(post: LogPosterior, theta0: NDArray) -> NDArray:
     return np.concatenate([theta0, grid[int(np.argmax(v))]])
 
 
+def _curvature_scale(post: LogPosterior, x: NDArray, h: NDArray) -> tuple[float, NDArray]:
+    """Log posterior at x and a scale per coordinate: 1/sqrt(curvature) from the second
+    differences of one gradient call (the prior width where the curvature is not usable)."""
+    d = x.size
+    v = post(np.vstack([x, x + np.diag(h), x - np.diag(h)]))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        curv = -(v[1:d + 1] - 2 * v[0] + v[d + 1:]) / h**2
+        inv_sqrt = 1.0 / np.sqrt(np.abs(curv))
+    width = np.array([hi - lo if lo is not None and hi is not None else 1.0
+                      for lo, hi in post.bounds()])
+    scale = np.where(np.isfinite(curv) & (curv > 0), inv_sqrt, width)
+    return (float(v[0]) if np.isfinite(v[0]) else 0.0), np.clip(scale, 1e-9, width)
+
+
+def _stationary(res: so.OptimizeResult, bounds: list[tuple[float | None, float | None]]
+                ) -> bool:
+    """Projected gradient (whitened units) below 1e-2: less than ~1e-4 nats are left."""
+    g = np.asarray(res.jac, dtype=float)
+    lo = np.array([-np.inf if a is None else a for a, _ in bounds])
+    hi = np.array([np.inf if b is None else b for _, b in bounds])
+    g = np.where((res.x <= lo + 1e-12) & (g > 0), 0.0, g)
+    g = np.where((res.x >= hi - 1e-12) & (g < 0), 0.0, g)
+    return bool(np.all(np.isfinite(g)) and np.max(np.abs(g), initial=0.0) < 1e-2)
+
+
 def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
-                  ) -> tuple[NDArray, bool]:
-    """One local maximisation of the log posterior from x (Nelder-Mead or L-BFGS-B)."""
+                 ) -> tuple[NDArray, bool]:
+    """One local maximisation of the log posterior from x (Nelder-Mead or L-BFGS-B).
+
+    L-BFGS-B runs in whitened coordinates u = (x - x0) / scale, scale from the curvature
+    at the start, on the log posterior measured from its start value: without that its
+    first projected step (identity Hessian) can jump to a corner of the box, and its ftol
+    (relative to |f| ~ 4e5) lets it stop after a negligible step. A line search that can
+    improve no further at a stationary point (rounding; very peaked noise-free posteriors)
+    counts as converged.
+    """
     if method == "nelder-mead":
         def neg(v: NDArray) -> float:
             f = post(v[None])[0]
@@ -200,42 +233,17 @@ def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
         raise BayesAmbError(f"unknown MAP method {method!r}; known: lbfgs, nelder-mead")
     h = _steps(post)
     x = np.asarray(x, dtype=float)
-    # Diagonal preconditioning: each coordinate is measured in units of its curvature
-    # scale at the start (second differences come free with the gradient), and the
-    # objective from its start value. Without it L-BFGS-B's first projected step, taken
-    # with an identity Hessian, can jump to a corner of the box, and its ftol (relative to
-    # |f| ~ 4e5) would let it stop after a negligible step.
-    pts = np.vstack([x, x + np.diag(h), x - np.diag(h)])
-    v = post(pts)
-    d = x.size
-    f0 = float(v[0]) if np.isfinite(v[0]) else 0.0
-    with np.errstate(invalid="ignore", divide="ignore"):
-        curv = -(v[1:d + 1] - 2 * v[0] + v[d + 1:]) / h**2
-        inv_sqrt = 1.0 / np.sqrt(np.abs(curv))
-    lo, hi = (np.array([np.nan if b is None else b for b in col], dtype=float)
-              for col in zip(*post.bounds(), strict=True))
-    width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-    scale = np.where(np.isfinite(curv) & (curv > 0), inv_sqrt, width)
-    scale = np.clip(scale, 1e-9, width)
+    f0, scale = _curvature_scale(post, x, h)
 
     def fun(u: NDArray) -> tuple[float, NDArray]:
         f, g = _grad(post, x + scale * u, h)
         return (-(f - f0), -g * scale) if np.isfinite(f) else (_BIG, np.zeros_like(u))
 
-    ubounds = [(None if np.isnan(a) else (a - xi) / si, None if np.isnan(b) else (b - xi) / si)
-               for a, b, xi, si in zip(lo, hi, x, scale, strict=True)]
-    res = so.minimize(fun, np.zeros(d), jac=True, method="L-BFGS-B", bounds=ubounds,
+    ubounds = [(None if lo is None else (lo - xi) / si, None if hi is None else (hi - xi) / si)
+               for (lo, hi), xi, si in zip(post.bounds(), x, scale, strict=True)]
+    res = so.minimize(fun, np.zeros(x.size), jac=True, method="L-BFGS-B", bounds=ubounds,
                       options={"maxiter": maxiter, "ftol": 1e-10, "gtol": 1e-5})
-    # A line search that cannot improve further at a stationary point (rounding, very
-    # peaked noise-free posteriors) is converged, not failed: the projected gradient in
-    # whitened units below 1e-2 means less than ~1e-4 nats are left.
-    g = np.asarray(res.jac, dtype=float)
-    u_lo = np.array([-np.inf if a is None else a for a, _ in ubounds])
-    u_hi = np.array([np.inf if b is None else b for _, b in ubounds])
-    g = np.where((res.x <= u_lo + 1e-12) & (g > 0), 0.0, g)
-    g = np.where((res.x >= u_hi - 1e-12) & (g < 0), 0.0, g)
-    stationary = bool(np.all(np.isfinite(g)) and np.max(np.abs(g), initial=0.0) < 1e-2)
-    return x + scale * res.x, bool(res.success) or stationary
+    return x + scale * res.x, bool(res.success) or _stationary(res, ubounds)
 
 
 def _starts(post: LogPosterior, theta_ls: NDArray, n_random: int, seed: int) -> list[NDArray]:
