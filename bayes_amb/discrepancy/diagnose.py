@@ -28,7 +28,6 @@ from bayes_amb.discrepancy.fitstats import (
     draws,
     effect_summaries,
     fit_quality,
-    predict,
     residual_spectrum,
     theta_summary,
 )
@@ -125,11 +124,13 @@ class Diagnosis:
         return d
 
 
-def improvement_location(nominal: FittedModel, final: FittedModel, eps: np.ndarray,
+def improvement_location(nominal: FittedModel, final: FittedModel,
+                         residual_before: np.ndarray, residual_after: np.ndarray,
                          share: float = 0.8) -> dict[str, Any]:
     """Where the chosen model fits better than the nominal one: the likelihood bands that
     hold ``share`` of the total log-likelihood gain (merged to spans, Hz) and the channels
-    whose prediction changes by at least 30 % of the largest change."""
+    whose prediction changes by at least 30 % of the largest change (the prediction change
+    is the difference of the two residuals)."""
     if final is nominal:
         return {"bands_hz": [], "channels": [], "gain_by_band": []}
     like = final.like
@@ -147,7 +148,7 @@ def improvement_location(nominal: FittedModel, final: FittedModel, eps: np.ndarr
     f0 = like.k[like.starts] / (like.n * like.forward.dt)
     f1 = like.k[np.append(like.starts[1:], like.k.size) - 1] / (like.n * like.forward.dt)
     spans = merge_spans([[float(f0[i]), float(f1[i])] for i in keep])
-    change = np.sqrt(np.mean((predict(final) - predict(nominal)) ** 2, axis=0))
+    change = np.sqrt(np.mean((residual_before - residual_after) ** 2, axis=0))
     chans = [c for c, v in zip(CHANNELS, change, strict=True) if v >= 0.3 * change.max()]
     return {"bands_hz": spans, "channels": chans, "share": share,
             "gain_by_band": [[float(a), float(b), float(g)] for a, b, g in zip(f0, f1, d,
@@ -212,7 +213,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] = "
                              "evidence": f"log Bayes factor {fm.log_bf:.1f} against the model "
                                          "without it"})
     mismatch = loc.to_dict()
-    mismatch["improvement"] = improvement_location(nominal, sel.final, eps)
+    mismatch["improvement"] = improvement_location(nominal, sel.final, before["residual"],
+                                                   after["residual"])
     if sel.accepted and not loc.detected:
         # the model comparison is more powerful than the model-free tests: report where
         # the accepted physics improves the fit

@@ -103,10 +103,9 @@ def predict(fitted: FittedModel) -> NDArray:
     """Time-domain eps_pred (N, 4) at the MAP: S(theta) x plus any synchronous lines."""
     fwd = fitted.forward
     pred = fwd.simulate(fitted.params[None])
-    for c in fwd.line_candidates:
-        sl = fwd.slices[fwd.candidates.index(c)]
-        basis = fwd.line_responses(fitted.params[None])[fwd.line_candidates.index(c)]
-        pred = pred + basis @ fitted.params[sl]
+    for c, basis in zip(fwd.line_candidates, fwd.line_responses(fitted.params[None]),
+                        strict=True):
+        pred = pred + basis @ fitted.params[fwd.slices[fwd.candidates.index(c)]]
     return pred
 
 

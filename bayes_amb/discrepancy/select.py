@@ -116,7 +116,7 @@ def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None
     pf = parent.forward
     fwd = ExtendedForwardModel(pf.recording, pf.theta_names, (*parent.candidates, cand),
                                priors, template=pf)
-    like = parent.like.for_model(fwd, np.concatenate([fwd.null]))
+    like = parent.like.for_model(fwd, fwd.null)
     return fwd, like, LogPosterior(like, fwd.priors)
 
 

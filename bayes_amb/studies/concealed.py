@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 import time
 import traceback
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -96,8 +97,6 @@ def true_location(effect: Effect) -> str:
 
 def concealment(rig: Any, ctrl: Any, cfg: SimulationConfig, y: np.ndarray) -> float:
     """max over channels of RMS(effect contribution) / RMS(noise contribution) in y."""
-    from dataclasses import replace
-
     plain, _ = simulate_recording(rig, ctrl, replace(cfg, effects=()))
     quiet, _ = simulate_recording(rig, ctrl, replace(cfg, effects=(), noise_rms=0.0,
                                                      r1_rms=0.0, r2_rms=0.0))
@@ -112,7 +111,7 @@ def run_case(rig: Any, ctrl: Any, base: SimulationConfig, case: str, params: tup
     t0 = time.perf_counter()
     rng = np.random.default_rng(draw_seed)
     hidden = [draw_effect(n, rng) for n in case_effects(case)]
-    cfg = SimulationConfig(**{**base.__dict__, "effects": tuple(hidden), "seed": sim_seed})
+    cfg = replace(base, effects=tuple(hidden), seed=sim_seed)
     row: dict[str, Any] = {"case": case,
                            "hidden": ";".join(_effect_text(e) for e in hidden)}
     try:
