@@ -27,6 +27,7 @@ import scipy.stats as st
 
 import bayes_amb
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.priors import parse_prior
 from bayes_amb.plots.studies import study_figures
 from bayes_amb.studies import (
     StudyError,
@@ -445,3 +446,13 @@ def test_bench_study_throughput_counts_what_it_ran():
     assert b.replicates_per_s == pytest.approx(2 / b.wall_s)
     assert b.s_per_1000 == pytest.approx(500 * b.wall_s)
     assert 0 < b.replicate_wall_s_median <= b.wall_s
+
+
+def test_shipped_sbc_priors_stay_inside_the_simulator_range():
+    """The SBC datasets are drawn from the estimation priors; a prior with mass outside the
+    range the simulator accepts (|theta| <= 0.95) would lose datasets (or, if redrawn, make
+    the data prior differ from the posterior's)."""
+    spec = load_study(STUDIES / "sbc.toml")
+    for n in spec.estimate:
+        lo, hi = parse_prior(spec.priors[n], n).support
+        assert -0.95 <= lo and hi <= 0.95, (n, spec.priors[n])

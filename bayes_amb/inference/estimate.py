@@ -49,12 +49,10 @@ class LogPosterior:
     def bounds(self) -> list[tuple[float | None, float | None]]:
         b: list[tuple[float | None, float | None]] = []
         for pr in self.priors.priors:
-            if pr.kind == "uniform":
-                b.append((pr.a, pr.b))
-            elif pr.kind == "lognormal":
-                b.append((1e-12, None))
-            else:
-                b.append((None, None))
+            lo, hi = pr.support
+            if pr.kind == "lognormal":
+                lo = 1e-12
+            b.append((lo if np.isfinite(lo) else None, hi if np.isfinite(hi) else None))
         b += list(NOISE_LOG10_BOUNDS.values())
         return b
 

@@ -14,7 +14,12 @@ Syntax, on the command line (``--prior k_By=normal(0.3,0.2)``) or in a TOML file
     [priors]
     k_By = "uniform(-0.9, 0.9)"
     c_By = "normal(0.0, 0.3)"
+    k_Bx = "normal(0.0, 0.3, -0.95, 0.95)"   # truncated to [lo, hi] (renormalised)
     c_Ax = "lognormal(-1.0, 0.5)"   # log(theta) ~ N(mu, sigma), theta > 0
+
+A truncated normal is what a simulation-based calibration needs when the simulator accepts
+only part of the real line (|theta| <= 0.95): the datasets and the posterior then use the
+same prior.
 """
 
 from __future__ import annotations
@@ -26,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 
 from bayes_amb.errors import ParameterError
 from bayes_amb.tomlfile import read_toml
@@ -37,11 +43,14 @@ NOISE_LOG10_BOUNDS = {"sigma_noise": (-12.0, -3.0), "sigma_r1": (-12.0, -3.0),
 
 @dataclass(frozen=True)
 class Prior:
-    """A 1-D prior: kind in {uniform, normal, lognormal} with parameters (a, b)."""
+    """A 1-D prior: kind in {uniform, normal, lognormal} with parameters (a, b); a normal
+    may be truncated to [lo, hi]."""
 
     kind: str
     a: float
     b: float
+    lo: float = -math.inf
+    hi: float = math.inf
 
     def __post_init__(self) -> None:
         if self.kind not in ("uniform", "normal", "lognormal"):
@@ -53,6 +62,34 @@ class Prior:
             raise ParameterError(f"prior uniform({self.a}, {self.b}): expected lo < hi")
         if self.kind in ("normal", "lognormal") and not self.b > 0:
             raise ParameterError(f"prior {self.kind}({self.a}, {self.b}): expected sigma > 0")
+        if (self.lo, self.hi) != (-math.inf, math.inf):
+            if self.kind != "normal":
+                raise ParameterError(f"prior {self.kind}: only a normal prior takes bounds")
+            if not self.lo < self.hi or self._mass <= 1e-12:
+                raise ParameterError(f"prior {self}: expected lo < hi with prior mass between")
+
+    @property
+    def _z(self) -> tuple[float, float]:
+        return (self.lo - self.a) / self.b, (self.hi - self.a) / self.b
+
+    @property
+    def _mass(self) -> float:
+        """Probability of the untruncated normal inside [lo, hi]."""
+        za, zb = self._z
+        return float(stats.norm.cdf(zb) - stats.norm.cdf(za))
+
+    @property
+    def support(self) -> tuple[float, float]:
+        """(lo, hi) outside which the density is zero."""
+        if self.kind == "uniform":
+            return self.a, self.b
+        if self.kind == "lognormal":
+            return 0.0, math.inf
+        return self.lo, self.hi
+
+    @property
+    def truncated(self) -> bool:
+        return self.kind == "normal" and (self.lo, self.hi) != (-math.inf, math.inf)
 
     def logpdf(self, x: NDArray) -> NDArray:
         x = np.asarray(x, dtype=float)
@@ -60,7 +97,11 @@ class Prior:
             inside = (x >= self.a) & (x <= self.b)
             return np.where(inside, -np.log(self.b - self.a), -np.inf)
         if self.kind == "normal":
-            return -0.5 * ((x - self.a) / self.b) ** 2 - np.log(self.b * np.sqrt(2 * np.pi))
+            out = -0.5 * ((x - self.a) / self.b) ** 2 - np.log(self.b * np.sqrt(2 * np.pi))
+            if self.truncated:
+                inside = (x >= self.lo) & (x <= self.hi)
+                out = np.where(inside, out - np.log(self._mass), -np.inf)
+            return out
         with np.errstate(divide="ignore", invalid="ignore"):
             lx = np.log(np.where(x > 0, x, np.nan))
             out = -0.5 * ((lx - self.a) / self.b) ** 2 - lx - np.log(self.b * np.sqrt(2 * np.pi))
@@ -69,6 +110,9 @@ class Prior:
     def sample(self, rng: np.random.Generator, size: int) -> NDArray:
         if self.kind == "uniform":
             return rng.uniform(self.a, self.b, size)
+        if self.kind == "normal" and self.truncated:
+            return stats.truncnorm.rvs(*self._z, loc=self.a, scale=self.b, size=size,
+                                       random_state=rng)
         if self.kind == "normal":
             return rng.normal(self.a, self.b, size)
         return np.exp(rng.normal(self.a, self.b, size))
@@ -77,12 +121,15 @@ class Prior:
     def sd(self) -> float:
         if self.kind == "uniform":
             return (self.b - self.a) / math.sqrt(12)
+        if self.kind == "normal" and self.truncated:
+            return float(stats.truncnorm.std(*self._z, loc=self.a, scale=self.b))
         if self.kind == "normal":
             return self.b
         return math.sqrt((math.exp(self.b**2) - 1) * math.exp(2 * self.a + self.b**2))
 
     def __str__(self) -> str:
-        return f"{self.kind}({self.a:g}, {self.b:g})"
+        bounds = f", {self.lo:g}, {self.hi:g}" if self.truncated else ""
+        return f"{self.kind}({self.a:g}, {self.b:g}{bounds})"
 
 
 def default_prior(name: str) -> Prior:
@@ -91,20 +138,25 @@ def default_prior(name: str) -> Prior:
     return Prior("uniform", -1.0, 1.0) if spec.kind == "kxy" else Prior("uniform", -0.8, 0.8)
 
 
-_PRIOR_RE = re.compile(r"^\s*(uniform|normal|lognormal)\s*\(\s*([^,()]+)\s*,\s*([^,()]+)\s*\)\s*$")
+_PRIOR_RE = re.compile(r"^\s*(uniform|normal|lognormal)\s*\(([^()]*)\)\s*$")
 
 
 def parse_prior(text: str, name: str = "?") -> Prior:
-    """'uniform(-0.9, 0.9)' -> Prior."""
+    """'uniform(-0.9, 0.9)' or 'normal(0, 0.3, -0.95, 0.95)' (truncated) -> Prior."""
     m = _PRIOR_RE.match(text)
-    if not m:
+    args = m.group(2).split(",") if m else []
+    if not m or len(args) not in ((2, 4) if m.group(1) == "normal" else (2,)):
         raise ParameterError(f"prior for {name}: cannot parse {text!r}; expected e.g. "
-                             "uniform(-0.9,0.9), normal(0,0.3) or lognormal(-1,0.5)")
+                             "uniform(-0.9,0.9), normal(0,0.3), normal(0,0.3,-0.95,0.95) or "
+                             "lognormal(-1,0.5)")
     try:
-        a, b = float(m.group(2)), float(m.group(3))
+        values = [float(v) for v in args]
     except ValueError:
         raise ParameterError(f"prior for {name}: non-numeric value in {text!r}") from None
-    return Prior(m.group(1), a, b)
+    try:
+        return Prior(m.group(1), *values)
+    except ParameterError as exc:
+        raise ParameterError(f"prior for {name}: {exc}") from None
 
 
 def parse_prior_assignment(text: str) -> tuple[str, Prior]:

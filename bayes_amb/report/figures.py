@@ -183,7 +183,8 @@ def _prior_grid(text: str):
         pad = 0.05 * (pr.b - pr.a)
         grid = np.linspace(pr.a - pad, pr.b + pad, 600)
     elif pr.kind == "normal":
-        grid = np.linspace(pr.a - 4 * pr.b, pr.a + 4 * pr.b, 600)
+        lo, hi = pr.support
+        grid = np.linspace(max(pr.a - 4 * pr.b, lo), min(pr.a + 4 * pr.b, hi), 600)
     else:
         grid = np.linspace(1e-9, float(np.exp(pr.a + 4 * pr.b)), 600)
     return grid, lambda x: np.exp(pr.logpdf(x))
