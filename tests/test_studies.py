@@ -456,3 +456,27 @@ def test_shipped_sbc_priors_stay_inside_the_simulator_range():
     for n in spec.estimate:
         lo, hi = parse_prior(spec.priors[n], n).support
         assert -0.95 <= lo and hi <= 0.95, (n, spec.priors[n])
+
+
+def test_sbc_figures_render_and_mark_what_fails(tmp_path):
+    """Rank histograms and the coverage figure from sbc_statistics; an overconfident
+    parameter (ranks at the ends) is drawn in the failure colour in both."""
+    from matplotlib.colors import to_rgba
+
+    from bayes_amb.plots.studies import plot_sbc_coverage, plot_sbc_ranks
+    from bayes_amb.plots.style import save_figure, style_context
+    spec = study_from_dict(tiny())
+    rng = np.random.default_rng(10)
+    sbc = {"k_By": sbc_statistics(spec, _sbc_rows(rng.uniform(size=400)))["k_By"],
+           "c_By": sbc_statistics(spec, _sbc_rows(rng.beta(0.4, 0.4, 400)))["k_By"]}
+    assert sbc["k_By"]["calibrated"] and not sbc["c_By"]["coverage90_ok"]
+    with style_context():
+        cov = plot_sbc_coverage(sbc)
+        ranks = plot_sbc_ranks(sbc)
+        failed = [line for ax in cov.axes for line in ax.get_lines()
+                  if line.get_marker() == "X"]
+        assert failed and all(line.get_xdata().tolist() == [1] for line in failed)
+        bars = list(ranks.axes[1].containers[0])
+        assert bars and all(b.get_facecolor() == to_rgba("C3") for b in bars)
+        paths = [save_figure(cov, tmp_path / "cov.png"), save_figure(ranks, tmp_path / "r.png")]
+    assert all(p.stat().st_size > 10_000 for p in paths)

@@ -1,5 +1,5 @@
 """Study figures: bias and 90 % interval width against each factor with coverage, and SBC
-rank histograms. Built from the study's summary and results files only."""
+rank histograms and interval coverage. Built from the study's summary and results files only."""
 
 from __future__ import annotations
 
@@ -110,6 +110,35 @@ def plot_sbc_ranks(sbc: dict[str, Any], n_bins: int = 10) -> Figure:
     return fig
 
 
+@styled
+def plot_sbc_coverage(sbc: dict[str, Any]) -> Figure:
+    """Coverage of the central 50 % and 90 % posterior intervals per parameter, against the
+    99 % binomial band of a calibrated posterior (shaded)."""
+    names = list(sbc)
+    fig = Figure(figsize=(7.6, 3.0), layout="constrained")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(1, 2, sharey=False)
+    x = np.arange(len(names))
+    for ax, level in zip(axes, (50, 90), strict=True):
+        lo, hi = sbc[names[0]][f"band{level}"]
+        ax.axhspan(lo, hi, color="0.88", zorder=0, label="99 % band")
+        ax.axhline(level / 100, color="0.2", lw=0.8, zorder=1, label="nominal")
+        cov = np.array([sbc[n][f"coverage{level}"] for n in names])
+        ok = np.array([bool(sbc[n][f"coverage{level}_ok"]) for n in names])
+        ax.plot(x[ok], cov[ok], "o", color="C0", zorder=2, label="inside the band")
+        if not ok.all():
+            ax.plot(x[~ok], cov[~ok], "X", color="C3", ms=8, zorder=2, label="outside")
+        ax.set_xticks(x, names, rotation=45, ha="right", fontsize=8)
+        pad = 0.06
+        ax.set_ylim(min(lo, cov.min()) - pad, max(hi, cov.max()) + pad)
+        ax.set_title(f"{level} % central intervals", fontsize=9)
+        ax.set_ylabel("coverage")
+    axes[1].legend(fontsize=7, loc="lower right")
+    fig.suptitle(f"SBC coverage ({sbc[names[0]]['n']} datasets)")
+    return fig
+
+
 def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
     """Write DIR/figures/*.png for a finished study; returns the paths."""
     out = Path(out_dir)
@@ -131,4 +160,6 @@ def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
                                      figdir / "benchmark.png"))
         if manifest.get("sbc"):
             paths.append(save_figure(plot_sbc_ranks(manifest["sbc"]), figdir / "sbc_ranks.png"))
+            paths.append(save_figure(plot_sbc_coverage(manifest["sbc"]),
+                                     figdir / "sbc_coverage.png"))
     return paths
