@@ -490,6 +490,18 @@ def test_default_multisine_fits_the_sample_rate(dt):
     assert np.all(P[f < 4.0].sum(axis=0) < 1e-20 * P.sum(axis=0))
 
 
+
+def test_narrow_band_multisine_has_power_only_in_its_band():
+    """excitation_band_hz=(95, 105) at 1 kHz over 1 s: every line on the record's 1 Hz grid
+    inside [95, 105] Hz, nothing outside (< 1e-20 of the total)."""
+    n, dt = 1000, 1e-3
+    x = excitation("multisine", n, 4, 0.5, np.random.default_rng(1), dt, (95.0, 105.0))
+    P = np.abs(np.fft.rfft(x, axis=0)) ** 2
+    f = np.fft.rfftfreq(n, dt)
+    inside = (f >= 95) & (f <= 105)
+    assert np.all(P[~inside].sum(axis=0) < 1e-20 * P.sum(axis=0))
+    assert np.all(P[inside] > 1e-3 * P.max())
+
 # ---------------------------------------------------------------------------------------------
 # reproducibility and truth isolation
 

@@ -132,6 +132,10 @@ BAD = [
     (["--controller", "{ctl}"], "field dt: 0.0001 s does not match the simulation dt 0.001 s"),
     (["--noise-rms=-1e-7"], "option --noise-rms: expected a non-negative number"),
     (["--duration", "0"], "option --duration: expected 0 < s <= 600, got 0.0"),
+    (["--band", "10,20"], "option --band: only the multisine excitation has a band"),
+    (["--excitation", "multisine", "--band", "20,10"],
+     r"option --band: expected 0 < lo < hi <= Nyquist 500 Hz, got \[20.0, 10.0\]"),
+    (["--excitation", "multisine", "--band", "10"], "option --band: expected LO,HI in Hz"),
 ]
 
 

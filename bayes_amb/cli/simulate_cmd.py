@@ -31,6 +31,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="hidden physics, e.g. actuator_lag:bandwidth_hz=600 (repeatable)")
     p.add_argument("--excitation", choices=EXCITATIONS, default="random-binary")
     p.add_argument("--amplitude", type=float, default=0.5, help="excitation amplitude, A")
+    p.add_argument("--band", default=None, metavar="LO,HI", help="multisine band, Hz "
+                   "(default 5 Hz to min(1 kHz, 0.8 Nyquist)); a narrow band informs only a "
+                   "combination of parameters")
     p.add_argument("--r1-rms", type=float, default=0.0, help="sensor-side disturbance RMS, m")
     p.add_argument("--r2-rms", type=float, default=0.0, help="actuator-side disturbance RMS, A")
     p.add_argument("--r1-band-hz", type=float, default=None, help="r1 low-pass band, Hz")
@@ -60,6 +63,18 @@ def parse_assignments(items: list[str]) -> dict[str, float]:
     return out
 
 
+def parse_band(text: str | None) -> tuple[float, float] | None:
+    """'95,105' -> (95.0, 105.0)."""
+    if text is None:
+        return None
+    parts = text.split(",")
+    try:
+        lo, hi = (float(v) for v in parts)
+    except ValueError:
+        raise ParameterError(f"option --band: expected LO,HI in Hz, got {text!r}") from None
+    return lo, hi
+
+
 def run(args: argparse.Namespace) -> int:
     rig = load_rig(args.rig)
     if args.controller:
@@ -69,6 +84,7 @@ def run(args: argparse.Namespace) -> int:
     cfg = SimulationConfig(truth=args.truth, params=parse_assignments(args.set),
                            effects=tuple(parse_effect(e) for e in args.effect),
                            excitation=args.excitation, amplitude=args.amplitude,
+                           excitation_band_hz=parse_band(args.band),
                            noise_rms=args.noise_rms, r1_rms=args.r1_rms, r2_rms=args.r2_rms,
                            r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz,
                            duration=args.duration, dt=args.dt, speed_rpm=args.speed_rpm,

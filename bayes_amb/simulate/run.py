@@ -30,6 +30,9 @@ class SimulationConfig:
     Defaults: full 320-state truth, 0.5 s at 10 kHz, random binary excitation of 0.5 A
     (about 10 % of a 5 A saturation current), no noise or disturbances, nominal speed.
     ``r1_band_hz``/``r2_band_hz`` None means white; otherwise low-pass band-limited.
+    ``excitation_band_hz`` (lo, hi) sets the band of a multisine excitation (default 5 Hz to
+    min(1 kHz, 0.8 Nyquist)); a narrow band is how a test that informs only a combination of
+    parameters is simulated.
     """
 
     truth: str = "full"
@@ -37,6 +40,7 @@ class SimulationConfig:
     effects: tuple[Effect, ...] = ()
     excitation: str = "random-binary"
     amplitude: float = 0.5
+    excitation_band_hz: tuple[float, float] | None = None
     noise_rms: float = 0.0
     r1_rms: float = 0.0
     r2_rms: float = 0.0
@@ -63,6 +67,15 @@ class SimulationConfig:
             get_spec(name)
             if not (np.isfinite(th) and -0.95 <= th <= 0.95):
                 raise BayesAmbError(f"option --set: {name}={th!r} out of range [-0.95, 0.95]")
+        if self.excitation_band_hz is not None:
+            band = self.excitation_band_hz
+            if self.excitation != "multisine":
+                raise BayesAmbError(f"option --band: only the multisine excitation has a band "
+                                    f"(excitation is {self.excitation!r})")
+            if not (len(band) == 2 and all(np.isfinite(band))
+                    and 0 < band[0] < band[1] <= 0.5 / self.dt):
+                raise BayesAmbError(f"option --band: expected 0 < lo < hi <= Nyquist "
+                                    f"{0.5 / self.dt:g} Hz, got {list(band)!r}")
         if self.seed < 0:
             raise BayesAmbError(f"option --seed: expected a non-negative integer, got {self.seed}")
 
@@ -94,7 +107,8 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
                             f"{2 * rig.nominal_speed_rpm:g}")
     n = round(config.duration / config.dt)
     streams = np.random.default_rng(config.seed).spawn(4)
-    exc = excitation(config.excitation, n, 4, config.amplitude, streams[0], config.dt)
+    exc = excitation(config.excitation, n, 4, config.amplitude, streams[0], config.dt,
+                     config.excitation_band_hz)
     noise = gaussian_noise(n, 4, config.noise_rms, streams[1], config.dt)
     r1 = gaussian_noise(n, 4, config.r1_rms, streams[2], config.dt, config.r1_band_hz)
     r2 = gaussian_noise(n, 4, config.r2_rms, streams[3], config.dt, config.r2_band_hz)

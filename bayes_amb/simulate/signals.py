@@ -58,14 +58,16 @@ def multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt:
 
 
 def excitation(kind: str, n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
-               dt: float) -> NDArray:
-    """Dispatch on the excitation name (random-binary, prbs, multisine)."""
+               dt: float, band_hz: tuple[float, float] | None = None) -> NDArray:
+    """Dispatch on the excitation name (random-binary, prbs, multisine; band_hz only for
+    multisine)."""
     if kind == "random-binary":
         return random_binary(n, n_ch, amplitude, rng)
     if kind == "prbs":
         return prbs(n, n_ch, amplitude, rng)
     if kind == "multisine":
-        return multisine(n, n_ch, amplitude, rng, dt)
+        return multisine(n, n_ch, amplitude, rng, dt,
+                         None if band_hz is None else (float(band_hz[0]), float(band_hz[1])))
     raise BayesAmbError(f"option --excitation: unknown value {kind!r}; known: "
                         f"{', '.join(EXCITATIONS)}")
 
