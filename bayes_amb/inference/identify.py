@@ -167,7 +167,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     loglik = pointwise_log_likelihood(like, run.samples, post.p)
     attrs = {"package_version": __version__, "recording": recording.source,
              "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin, "seed": opt.seed,
-             "inference": "emcee ensemble (DE + snooker moves), walkers as chains"}
+             "inference": "emcee ensemble (differential-evolution moves), walkers as chains"}
     dt = to_datatree(names, run.samples, run.log_post, loglik, like, eps, forward.x, run.tau,
                      attrs)
     params_summary = summarise(dt, names, run.tau, recording.rig)
