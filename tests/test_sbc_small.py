@@ -236,11 +236,14 @@ def test_sbc_iid_noise_model_is_miscalibrated(sbc):
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason=(
-    "measured (seed 20260, 892 s): k_By mean rank / 99 = 0.584 (z = +2.88), rank counts "
-    "[13, 15, 20, 21, 31]; c_By 0.505 (z = +0.18); coverages inside the bands. Suspected "
-    "cause: find_map leaves sigma_r1 at 1e-11 m (see test_identify::"
-    "test_map_is_not_below_the_truth_with_an_r1_disturbance), so the r1 part of eps is "
-    "modelled with the wrong spectrum"))
+    "measured (seed 20260; 892 s at commit 8bcdf52, 213 s at 7dfce00 with the fixed "
+    "sampler): k_By mean rank / 99 = 0.584 (z = +2.89), rank counts [14, 15, 20, 19, 32]; "
+    "c_By 0.507 (z = +0.24); coverages inside the bands. Not the sampler (fixed, unchanged "
+    "result) and not the MAP's sigma_r1 (test_identify::test_map_is_not_below_the_truth_with"
+    "_an_r1_disturbance passes). Open hypothesis: with r1 = 1e-5 m the r1 part of eps scales "
+    "with S(theta), so the plug-in noise filters (fixed at the MAP) drop a first-order "
+    "dependence of the residual spectrum on k_By. The 8-parameter SBC study (r1 = 1e-7 m) "
+    "is calibrated"))
 def test_sbc_loop_noise_model_is_calibrated_100_datasets():
     """The default test with 100 datasets (loop model only): the same checks, and the mean
     normalised rank within its 99 % band (|z| < 2.576), which detects a posterior shifted by
