@@ -315,3 +315,20 @@ def test_cli_identify_missing_recording_exits_2(tmp_path, capsys):
                               "--out", str(tmp_path / "r"), "--map-only"], capsys)
     assert code == 2 and out == ""
     assert err.count("\n") == 1 and "nope" in err, err
+
+
+def test_map_does_not_run_into_a_prior_corner():
+    """Regression: 0.5 um sensor noise, r2 0.02 A, k_By and c_By from 1 s at 1 kHz (the
+    record-length study's cell). L-BFGS-B started with the noise intensities decades off
+    jumped to c_By = -0.8 (a prior bound), 128 nats below the Nelder-Mead MAP (seed 2,
+    k_By 0.5019, c_By 0.1527, log posterior 37721.08). Now the noise intensities are fitted
+    at each start and theta moves inside a trust box."""
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-3), rig)
+    rec, _ = simulate(rig, ctrl, {"k_By": 0.5, "c_By": 0.2}, duration=1.0, noise_rms=5e-7,
+                      r2_rms=0.02, amplitude=0.5, seed=2)
+    res = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True))
+    assert res.map.log_post > 37721.07
+    assert res.summary["map"]["k_By"] == pytest.approx(0.5019, abs=1e-3)
+    assert res.summary["map"]["c_By"] == pytest.approx(0.1527, abs=1e-3)
+    assert res.summary["converged"]

@@ -179,7 +179,32 @@ def _initial_point(post: LogPosterior, theta0: NDArray) -> NDArray:
     grid = np.array([[a, b, c] for a in (-11, -9, -7, -5) for b in (-11, -8, -6, -4)
                      for c in (-7, -5, -3, -1)], dtype=float)
     v = post(np.hstack([np.tile(theta0, (grid.shape[0], 1)), grid]))
-    return np.concatenate([theta0, grid[int(np.argmax(v))]])
+    x = np.concatenate([theta0, grid[int(np.argmax(v))]])
+    return _fit_noise(post, x)
+
+
+def _fit_noise(post: LogPosterior, x: NDArray, maxiter: int = 60) -> NDArray:
+    """The noise intensities maximised at fixed theta (a 3-dimensional L-BFGS-B): a joint
+    search started with them decades off sees a distorted theta landscape and can run into
+    a corner of the prior."""
+    p = post.p
+    h = _steps(post)[p:]
+
+    def fun(s: NDArray) -> tuple[float, NDArray]:
+        pts = np.vstack([s, s + np.diag(h), s - np.diag(h)])
+        v = post(np.hstack([np.tile(x[:p], (pts.shape[0], 1)), pts]))
+        if not np.isfinite(v[0]):
+            return _BIG, np.zeros_like(s)
+        g = (v[1:4] - v[4:]) / (2 * h)
+        return -(float(v[0]) - f0), -np.where(np.isfinite(g), g, 0.0)
+
+    f0 = float(post(x[None])[0])
+    if not np.isfinite(f0):
+        return x
+    res = so.minimize(fun, x[p:], jac=True, method="L-BFGS-B", bounds=post.bounds()[p:],
+                      options={"maxiter": maxiter, "ftol": 1e-12, "gtol": 1e-6})
+    out = np.concatenate([x[:p], res.x])
+    return out if post(out[None])[0] >= f0 else x
 
 
 def _curvature_scale(post: LogPosterior, x: NDArray, h: NDArray) -> tuple[float, NDArray]:
@@ -207,6 +232,11 @@ def _stationary(res: so.OptimizeResult, bounds: list[tuple[float | None, float |
     return bool(np.all(np.isfinite(g)) and np.max(np.abs(g), initial=0.0) < 1e-2)
 
 
+_TRUST = 3.0
+"""Half-width of the trust box of one L-BFGS-B run, in curvature scales (about 3 sd)."""
+_MAX_RECENTRES = 20
+
+
 def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
                  ) -> tuple[NDArray, bool]:
     """One local maximisation of the log posterior from x (Nelder-Mead or L-BFGS-B).
@@ -216,7 +246,11 @@ def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
     first projected step (identity Hessian) can jump to a corner of the box, and its ftol
     (relative to |f| ~ 4e5) lets it stop after a negligible step. A line search that can
     improve no further at a stationary point (rounding; very peaked noise-free posteriors)
-    counts as converged.
+    counts as converged. Each run confines theta (not the noise intensities, whose
+    curvature scale far from their optimum is tiny) to a trust box of +-_TRUST scales around
+    its start, re-centred (and the scales re-measured) while the optimum lies on the box's
+    edge: an unconfined first step can land in a corner of the prior with a poorer local
+    maximum (seen with 0.5 um noise and r2 on: k_By, c_By = 0.8, 0.8, 72 nats below the MAP).
     """
     if method == "nelder-mead":
         def neg(v: NDArray) -> float:
@@ -231,17 +265,31 @@ def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
         raise BayesAmbError(f"unknown MAP method {method!r}; known: lbfgs, nelder-mead")
     h = _steps(post)
     x = np.asarray(x, dtype=float)
-    f0, scale = _curvature_scale(post, x, h)
+    remaining = maxiter
+    for _ in range(_MAX_RECENTRES):
+        f0, scale = _curvature_scale(post, x, h)
 
-    def fun(u: NDArray) -> tuple[float, NDArray]:
-        f, g = _grad(post, x + scale * u, h)
-        return (-(f - f0), -g * scale) if np.isfinite(f) else (_BIG, np.zeros_like(u))
+        def fun(u: NDArray, x: NDArray = x, f0: float = f0, scale: NDArray = scale
+                ) -> tuple[float, NDArray]:
+            f, g = _grad(post, x + scale * u, h)
+            return (-(f - f0), -g * scale) if np.isfinite(f) else (_BIG, np.zeros_like(u))
 
-    ubounds = [(None if lo is None else (lo - xi) / si, None if hi is None else (hi - xi) / si)
-               for (lo, hi), xi, si in zip(post.bounds(), x, scale, strict=True)]
-    res = so.minimize(fun, np.zeros(x.size), jac=True, method="L-BFGS-B", bounds=ubounds,
-                      options={"maxiter": maxiter, "ftol": 1e-10, "gtol": 1e-5})
-    return x + scale * res.x, bool(res.success) or _stationary(res, ubounds)
+        prior = [(None if lo is None else (lo - xi) / si, None if hi is None else (hi - xi) / si)
+                 for (lo, hi), xi, si in zip(post.bounds(), x, scale, strict=True)]
+        ubounds = [(max(lo, -_TRUST) if lo is not None else -_TRUST,
+                    min(hi, _TRUST) if hi is not None else _TRUST) if j < post.p else (lo, hi)
+                   for j, (lo, hi) in enumerate(prior)]
+        res = so.minimize(fun, np.zeros(x.size), jac=True, method="L-BFGS-B", bounds=ubounds,
+                          options={"maxiter": remaining, "ftol": 1e-10, "gtol": 1e-5})
+        x = x + scale * res.x
+        remaining -= res.nit
+        at_trust_edge = (np.abs(res.x) >= _TRUST - 1e-9) & (np.arange(x.size) < post.p)
+        on_prior_bound = np.array([(lo is not None and r <= lo + 1e-9) or
+                                   (hi is not None and r >= hi - 1e-9)
+                                   for (lo, hi), r in zip(prior, res.x, strict=True)])
+        if not np.any(at_trust_edge & ~on_prior_bound) or remaining <= 0:
+            break
+    return x, bool(res.success) or _stationary(res, ubounds)
 
 
 def _starts(post: LogPosterior, theta_ls: NDArray, n_random: int, seed: int) -> list[NDArray]:
