@@ -29,6 +29,13 @@ def _num(v: str) -> float:
         return float("nan")
 
 
+def _mean_or_nan(values: list[float]) -> float:
+    """Mean of the finite values (NaN when there are none, e.g. no Laplace interval)."""
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(v.mean()) if v.size else float("nan")
+
+
 @styled
 def plot_factor(summary: list[dict[str, str]], factor: str, param: str) -> Figure:
     """Bias (+- RMSE) and mean 90 % interval width of one parameter against one factor,
@@ -42,7 +49,7 @@ def plot_factor(summary: list[dict[str, str]], factor: str, param: str) -> Figur
     agg = []
     for lv in levels:
         rs = [r for r in rows if _num(r[f"f_{factor}"]) == lv]
-        agg.append([np.nanmean([_num(r[k]) for r in rs]) for k in
+        agg.append([_mean_or_nan([_num(r[k]) for r in rs]) for k in
                     ("bias", "rmse", "mean_width90", "coverage90", "coverage90_lo",
                      "coverage90_hi")])
     a = np.array(agg)
