@@ -72,13 +72,17 @@ class MapResult:
     cov: NDArray | None = None
 
 
-def _grad(post: LogPosterior, x: NDArray, h: NDArray) -> tuple[float, NDArray]:
-    d = x.size
-    pts = np.vstack([x, x + np.diag(h), x - np.diag(h)])
-    v = post(pts)
+def _grad(post: LogPosterior, x: NDArray, h: NDArray, idx: NDArray | None = None
+          ) -> tuple[float, NDArray]:
+    """Log posterior at x and its central-difference gradient along the coordinates idx
+    (all by default), with steps h (one per coordinate of x)."""
+    idx = np.arange(x.size) if idx is None else idx
+    steps = np.zeros((idx.size, x.size))
+    steps[np.arange(idx.size), idx] = h[idx]
+    v = post(np.vstack([x, x + steps, x - steps]))
     f = v[0]
     with np.errstate(invalid="ignore"):              # -inf - -inf at a prior bound
-        g = (v[1:d + 1] - v[d + 1:]) / (2 * h)
+        g = (v[1:idx.size + 1] - v[idx.size + 1:]) / (2 * h[idx])
     g[~np.isfinite(g)] = 0.0
     return f, g
 
@@ -188,15 +192,12 @@ def _fit_noise(post: LogPosterior, x: NDArray, maxiter: int = 60) -> NDArray:
     search started with them decades off sees a distorted theta landscape and can run into
     a corner of the prior."""
     p = post.p
-    h = _steps(post)[p:]
+    h = _steps(post)
+    noise = np.arange(p, x.size)
 
     def fun(s: NDArray) -> tuple[float, NDArray]:
-        pts = np.vstack([s, s + np.diag(h), s - np.diag(h)])
-        v = post(np.hstack([np.tile(x[:p], (pts.shape[0], 1)), pts]))
-        if not np.isfinite(v[0]):
-            return _BIG, np.zeros_like(s)
-        g = (v[1:4] - v[4:]) / (2 * h)
-        return -(float(v[0]) - f0), -np.where(np.isfinite(g), g, 0.0)
+        f, g = _grad(post, np.concatenate([x[:p], s]), h, noise)
+        return (-(f - f0), -g) if np.isfinite(f) else (_BIG, np.zeros_like(s))
 
     f0 = float(post(x[None])[0])
     if not np.isfinite(f0):
