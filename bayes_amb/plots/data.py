@@ -13,7 +13,7 @@ import numpy as np
 from matplotlib.figure import Figure
 from numpy.typing import NDArray
 
-from bayes_amb.plots.style import styled
+from bayes_amb.plots.style import new_figure, styled
 from bayes_amb.rig import CHANNELS
 
 UM = 1e6
@@ -21,9 +21,7 @@ _GROUP_LABEL = {"eta": ("η", "A"), "r2": ("r2", "A"), "r1": ("r1", "m")}
 
 
 def _grid(rows: int, cols: int, size: tuple[float, float], **kw):
-    fig = Figure(figsize=size, layout="constrained")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    FigureCanvasAgg(fig)
+    fig = new_figure(size)
     return fig, np.atleast_2d(fig.subplots(rows, cols, squeeze=False, **kw))
 
 

@@ -15,7 +15,7 @@ from matplotlib.figure import Figure
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayes_amb.plots.style import styled
+from bayes_amb.plots.style import new_figure, styled
 from bayes_amb.rig import CHANNELS
 
 _TRUE = "#2a9d48"
@@ -24,9 +24,7 @@ _POST = "#1f4e9a"
 
 
 def _grid(rows: int, cols: int, size: tuple[float, float], **kw):
-    fig = Figure(figsize=size, layout="constrained")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    FigureCanvasAgg(fig)
+    fig = new_figure(size)
     return fig, np.atleast_2d(fig.subplots(rows, cols, squeeze=False, **kw))
 
 

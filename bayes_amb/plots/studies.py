@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from bayes_amb.plots.style import save_figure, style_context, styled
+from bayes_amb.plots.style import new_figure, save_figure, style_context, styled
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec
 from bayes_amb.studies.summary import binomial_band
@@ -40,9 +40,7 @@ def _mean_or_nan(values: list[float]) -> float:
 def plot_factor(summary: list[dict[str, str]], factor: str, param: str) -> Figure:
     """Bias (+- RMSE) and mean 90 % interval width of one parameter against one factor,
     averaged over the other factors; below, coverage with its 95 % interval."""
-    fig = Figure(figsize=(7.6, 4.4), layout="constrained")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    FigureCanvasAgg(fig)
+    fig = new_figure((7.6, 4.4))
     ax, axc = fig.subplots(2, 1, sharex=True, height_ratios=(2, 1))
     rows = [r for r in summary if r["param"] == param]
     levels = sorted({_num(r[f"f_{factor}"]) for r in rows})
@@ -89,9 +87,7 @@ def plot_sbc_ranks(sbc: dict[str, Any], n_bins: int = 10) -> Figure:
     names = list(sbc)
     cols = min(4, len(names))
     rows = -(-len(names) // cols)
-    fig = Figure(figsize=(2.3 * cols + 0.6, 2.0 * rows + 0.8), layout="constrained")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    FigureCanvasAgg(fig)
+    fig = new_figure((2.3 * cols + 0.6, 2.0 * rows + 0.8))
     axes = np.atleast_1d(fig.subplots(rows, cols, squeeze=False, sharey=True)).ravel()
     for ax, n in zip(axes, names, strict=False):      # spare axes hidden below
         s = sbc[n]
@@ -122,9 +118,7 @@ def plot_sbc_coverage(sbc: dict[str, Any]) -> Figure:
     """Coverage of the central 50 % and 90 % posterior intervals per parameter, against the
     99 % binomial band of a calibrated posterior (shaded)."""
     names = list(sbc)
-    fig = Figure(figsize=(7.6, 3.0), layout="constrained")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    FigureCanvasAgg(fig)
+    fig = new_figure((7.6, 3.0))
     axes = fig.subplots(1, 2, sharey=False)
     x = np.arange(len(names))
     for ax, level in zip(axes, (50, 90), strict=True):

@@ -74,6 +74,13 @@ def styled[**P, R](func: Callable[P, R]) -> Callable[P, R]:
     return wrapper
 
 
+def new_figure(figsize: tuple[float, float] = FIGSIZE) -> Figure:
+    """A constrained-layout figure with its own Agg canvas (no pyplot state)."""
+    fig = Figure(figsize=figsize, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
 def new_axes(ax: Axes | None = None, figsize: tuple[float, float] = FIGSIZE
              ) -> tuple[Figure, Axes]:
     """The given axes and its figure, or a new Agg figure with one axes.
@@ -85,8 +92,7 @@ def new_axes(ax: Axes | None = None, figsize: tuple[float, float] = FIGSIZE
         while not isinstance(fig, Figure):      # a SubFigure: walk up to the root figure
             fig = fig.figure
         return fig, ax
-    fig = Figure(figsize=figsize, layout="constrained")
-    FigureCanvasAgg(fig)
+    fig = new_figure(figsize)
     return fig, fig.add_subplot()
 
 
