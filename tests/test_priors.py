@@ -9,7 +9,7 @@ import pytest
 from scipy import integrate, stats
 
 from bayes_amb.errors import ParameterError
-from bayes_amb.inference.priors import Prior, parse_prior
+from bayes_amb.inference.priors import parse_prior
 
 PRIORS = ["uniform(-0.9, 0.9)", "normal(0.2, 0.3)", "normal(0.0, 0.3, -0.95, 0.95)",
           "normal(0.5, 0.2, 0.0, 0.6)", "lognormal(-1.0, 0.5)"]

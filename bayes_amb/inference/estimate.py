@@ -204,8 +204,7 @@ def _fit_noise(post: LogPosterior, x: NDArray, maxiter: int = 60) -> NDArray:
         return x
     res = so.minimize(fun, x[p:], jac=True, method="L-BFGS-B", bounds=post.bounds()[p:],
                       options={"maxiter": maxiter, "ftol": 1e-12, "gtol": 1e-6})
-    out = np.concatenate([x[:p], res.x])
-    return out if post(out[None])[0] >= f0 else x
+    return np.concatenate([x[:p], res.x]) if res.fun <= 0 else x     # fun = f0 - f
 
 
 def _curvature_scale(post: LogPosterior, x: NDArray, h: NDArray) -> tuple[float, NDArray]:
@@ -284,11 +283,10 @@ def local_search(post: LogPosterior, method: str, x: NDArray, maxiter: int = 500
                           options={"maxiter": remaining, "ftol": 1e-10, "gtol": 1e-5})
         x = x + scale * res.x
         remaining -= res.nit
-        at_trust_edge = (np.abs(res.x) >= _TRUST - 1e-9) & (np.arange(x.size) < post.p)
-        on_prior_bound = np.array([(lo is not None and r <= lo + 1e-9) or
-                                   (hi is not None and r >= hi - 1e-9)
-                                   for (lo, hi), r in zip(prior, res.x, strict=True)])
-        if not np.any(at_trust_edge & ~on_prior_bound) or remaining <= 0:
+        # re-centre while a theta coordinate stops on the trust box (not on the prior)
+        on_trust_edge = any((u <= lo + 1e-9 and lo == -_TRUST) or (u >= hi - 1e-9 and hi == _TRUST)
+                            for (lo, hi), u in zip(ubounds[:post.p], res.x, strict=False))
+        if not on_trust_edge or remaining <= 0:
             break
     return x, bool(res.success) or _stationary(res, ubounds)
 
