@@ -6,6 +6,7 @@ Kolmogorov-Smirnov test on 400 p-values (it fails when the test is miscalibrated
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import numpy as np
@@ -14,10 +15,12 @@ from scipy import stats
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import DiagnoseOptions, all_candidates, diagnose
+from bayes_amb.discrepancy.candidates import BEARING_COEFFICIENTS
 from bayes_amb.discrepancy.locate import _coherence, holm, merge_spans
 from bayes_amb.io.recording import load_recording, save_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
+from bayes_amb.uncertainty import get_spec
 from tests.helpers import run_cli
 
 NOISE = {"noise_rms": 2e-7, "r1_rms": 1e-7, "r2_rms": 0.02}
@@ -69,9 +72,85 @@ def test_effect_free_recording_raises_no_alarm(control):
     r = d.report
     assert not r["mismatch"]["detected"]
     assert r["explanations"] == []
+    assert r["verdict"] == "no mismatch" and not r["unexplained"]["present"]
     assert r["summary"].startswith("No mismatch")
+    assert [c["ok"] for c in r["checks"]] == [True] * 4
+    assert r["record_window"]["at_rest"] and r["record_window"]["start_s"] == 0
     tried = {(c["effect"], c["location"]) for c in r["candidates"]}
-    assert tried == {(c.effect, c.location) for c in all_candidates()}
+    # the six coefficients left out of the fit are tried first, then every physics candidate
+    left_out = {("bearing_coefficient", n) for n in BEARING_COEFFICIENTS
+                if n not in ("k_By", "c_By")}
+    assert tried == {(c.effect, c.location) for c in all_candidates()} | left_out
+
+
+def _mid_operation(rec, cut: int, y_offset, u_offset):
+    """The same loop recorded from sample ``cut`` on, with sensor and current offsets."""
+    t = np.asarray(rec.t)[cut:]
+    return dataclasses.replace(
+        rec, t=t - t[0], y=np.asarray(rec.y)[cut:] + np.asarray(y_offset),
+        u=np.asarray(rec.u)[cut:] + np.asarray(u_offset),
+        excitation={k: np.asarray(v)[cut:] for k, v in rec.excitation.items()})
+
+
+def test_record_habits_are_nuisance_not_physics(ctrl):
+    """A record cut from a running loop (non-zero plant and controller state) with sensor
+    offsets of 20-50 um (seen by the controller, so u has them too): the checks find both,
+    the start-up is kept out of the comparison, and no physics is named."""
+    rig, c = ctrl
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3}, dt=1e-4, duration=0.8,
+                           seed=21, **NOISE)
+    rec, _ = simulate_recording(rig, c, cfg)
+    y_off = np.array([2e-5, -3e-5, 5e-5, 1e-5])
+    # the controller's steady-state answer to the offsets: its DC gain from y to u
+    A, B, C, D = (np.asarray(m) for m in (c.A, c.B, c.C, c.D))
+    dc = C[:4] @ np.linalg.solve(np.eye(A.shape[0]) - A, B[:, :4]) + D[:4, :4]
+    habit = _mid_operation(rec, 3000, y_off, dc @ y_off)
+    r = diagnose(habit).report
+    checks = {ch["check"]: ch for ch in r["checks"]}
+    assert checks["controller"]["ok"]
+    assert not checks["start"]["at_rest"]
+    assert any(s.startswith("y_Bx offset +50") for s in checks["offsets"]["removed"])
+    assert 0 < r["record_window"]["start_s"] <= 0.2 * 0.5
+    assert r["explanations"] == [] and not r["unexplained"]["present"]
+    # the eight coefficients are fitted by default; k_By = 0.3 is recovered
+    kb = r["parameters_before"]["k_By"]
+    assert len(r["parameters_before"]) == 8
+    assert kb["hdi90"][0] - 2 * kb["sd"] < 0.3 < kb["hdi90"][1] + 2 * kb["sd"]
+
+
+def test_a_controller_that_is_not_the_documented_one_fails_a_check(ctrl):
+    """The loop ran with the documented controller, but the sidecar's has a state-feedback
+    gain 1 % larger: the check fails and no physics is named."""
+    rec, _ = _rec(ctrl, seed=22, duration=0.3)
+    k = rec.controller
+    Cm = np.array(k.C)
+    Cm[:4] *= 1.01
+    wrong = dataclasses.replace(rec, controller=dataclasses.replace(k, C=Cm))
+    r = diagnose(wrong, "k_By,c_By").report
+    checks = {ch["check"]: ch for ch in r["checks"]}
+    assert not checks["controller"]["ok"] and "FAILED" in checks["controller"]["line"]
+    assert r["verdict"] == "data check failed" and r["explanations"] == []
+    assert r["summary"].startswith("The data failed a check")
+    # and the right controller passes the same check on the same data
+    ok = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=0)).report
+    assert {ch["check"]: ch["ok"] for ch in ok["checks"]}["controller"]
+
+
+def test_a_left_out_coefficient_is_named_before_physics(ctrl):
+    """k_Ax off by 0.4 while only k_By, c_By are fitted: the left-out coefficient is the
+    explanation, with its size, and no physics is named."""
+    rig, c = ctrl
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3, "k_Ax": 0.4}, dt=1e-4,
+                           duration=0.5, seed=23, **NOISE)
+    rec, _ = simulate_recording(rig, c, cfg)
+    r = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=1)).report
+    assert [(e["effect"], e["location"], e["kind"]) for e in r["explanations"]] == [
+        ("bearing_coefficient", "k_Ax", "model")]
+    v = r["explanations"][0]["params"]["value"]
+    true = 0.4 * get_spec("k_Ax").physical_scale(rig)
+    lo, hi = v["hdi90"]
+    sd = (hi - lo) / (2 * 1.645)
+    assert abs(v["mean"] - true) < 4 * sd
 
 
 @pytest.mark.parametrize("effect,name,key,true,loc", [
@@ -116,14 +195,14 @@ def test_cli_diagnose_writes_the_documented_file(ctrl, tmp_path, capsys):
     for k in ("before", "after"):
         assert set(r["fit"][k]) == {"nrmse", "whiteness_p"}
         assert set(r["fit"][k]["nrmse"]) == {"Ax", "Ay", "Bx", "By"}
-    assert set(r["parameters_before"]) == set(r["parameters_after"]) == {"k_By", "c_By"}
+    assert set(r["parameters_before"]) == set(r["parameters_after"]) == set(BEARING_COEFFICIENTS)
     assert [e["effect"] for e in r["explanations"]] == ["sensor_gain"]
     assert (out / "residuals.nc").is_file() and (out / "models" / "nominal.nc").is_file()
     # the stored truth never reaches the diagnosis: the same numbers without it
     side = json.loads(csv_path.with_suffix(".json").read_text())
     side.pop("truth")
     csv_path.with_suffix(".json").write_text(json.dumps(side))
-    d2 = diagnose(load_recording(csv_path), "k_By,c_By", options=DiagnoseOptions(
+    d2 = diagnose(load_recording(csv_path), options=DiagnoseOptions(
         candidates=tuple(c for c in all_candidates()
                          if c.effect in ("sensor_gain", "time_delay"))))
     assert d2.report["explanations"][0]["params"] == r["explanations"][0]["params"]

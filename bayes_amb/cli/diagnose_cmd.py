@@ -19,8 +19,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "greedily by Bayes factor and compare the fit before and after. "
                        "Writes DIR/diagnosis.json, DIR/residuals.nc and DIR/models/*.nc.")
     p.add_argument("recording", metavar="NAME.csv")
-    p.add_argument("--params", default="k_By,c_By",
-                   help="stiffness/damping parameters kept in every model (default k_By,c_By)")
+    p.add_argument("--params", default=None,
+                   help="stiffness/damping parameters kept in every model (default: all eight "
+                        "bearing coefficients k_Ax,k_Ay,k_Bx,k_By,c_Ax,c_Ay,c_Bx,c_By; any "
+                        "left out is tried as an explanation before any physics)")
     add_prior_options(p)
     p.add_argument("--effects", default=",".join(VOCABULARY),
                    help="effects to try (comma-separated; default all)")
@@ -39,7 +41,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def format_report(r: dict) -> str:
     mm = r["mismatch"]
-    lines = [f"Diagnosis of {r['recording']} ({r['inference']}, {r['wall_s']:.0f} s)",
+    lines = [f"Diagnosis of {r['recording']} ({r['inference']}, {r['wall_s']:.0f} s)"]
+    lines += [f"check         : {c['line']}" for c in r.get("checks", [])]
+    lines += [f"verdict       : {r.get('verdict', '')}",
              f"mismatch      : {'DETECTED' if mm['detected'] else 'none'}"
              + (f" on {', '.join(mm['channels'])}" if mm["channels"] else "")
              + (f"; bands {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in mm['bands_hz'])}"
@@ -51,10 +55,17 @@ def format_report(r: dict) -> str:
         for e in r["explanations"]:
             ps = ", ".join(f"{k} {v['map']:.4g} [{v['hdi90'][0]:.4g}, {v['hdi90'][1]:.4g}] "
                            f"{v['unit']}" for k, v in e["params"].items())
+            cls = e.get("equivalence_class", [])
+            same = f"; cannot be told from {', '.join(cls[1:])}" if len(cls) > 1 else ""
             lines.append(f"explanation   : {e['effect']} at {e['location']}: {ps} "
-                         f"(log BF {e['score']:.1f})")
+                         f"(log BF {e['score']:.1f}, {e.get('confidence', 'confident')}{same})")
     else:
-        lines.append("explanation   : none (no candidate physics is needed)")
+        lines.append("explanation   : none named")
+    un = r.get("unexplained") or {}
+    if un.get("present"):
+        lines.append(f"unexplained   : structure on {', '.join(un['channels'])}"
+                     + (f" in {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in un['bands_hz'])}"
+                        if un["bands_hz"] else ""))
     fb, fa = r["fit"]["before"], r["fit"]["after"]
     lines.append("NRMSE         : " + ", ".join(f"{c} {fb['nrmse'][c]:.4f} -> {fa['nrmse'][c]:.4f}"
                                               for c in fb["nrmse"]))

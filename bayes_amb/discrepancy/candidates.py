@@ -28,9 +28,10 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.inference.batched import expm_batched
-from bayes_amb.inference.priors import Prior
+from bayes_amb.inference.priors import Prior, default_prior
 from bayes_amb.rig import CHANNELS, Rig
 from bayes_amb.rotor import assemble, dof_index
+from bayes_amb.uncertainty import get_spec
 
 VOCABULARY = ("actuator_lag", "time_delay", "cross_coupling", "flexible_mode", "unbalance",
               "sensor_gain")
@@ -74,6 +75,13 @@ class Candidate:
 
     fingerprint = ""
     own_sampling = False     # samples the plant itself (one such candidate per model)
+    nominal_family = False   # a parameter of the nominal model left out of the fit: tried
+                             # before any physics (diagnose.py, select.py)
+
+    def equivalents(self) -> tuple[str, ...]:
+        """Explanations that give the same u -> y map as this one and so cannot be told
+        apart from u, y and the excitation (METHOD.md section 8); reported as its class."""
+        return ()
 
     @property
     def key(self) -> str:
@@ -181,6 +189,11 @@ class ActuatorLag(Candidate):
         E[:, :n, :n] = eye
         return A_aug, B_aug, E
 
+    def equivalents(self):
+        # a scalar lag on every actuator commutes with G: the same lag on every sensor
+        return ("sensor_lag@all (the same bandwidth on all four sensors)",) \
+            if self.location == "both" else ()
+
     def physical(self, draws, ctx):
         tau = np.maximum(draws[:, 0], 1e-12) * 1e-3
         return {"bandwidth_hz": (1.0 / (2 * np.pi * tau), "Hz")}
@@ -241,6 +254,10 @@ class TimeDelay(Candidate):
         E = np.zeros((nb, N, n))
         E[:, :n, :n] = np.eye(n)
         return A_aug, B_aug, E
+
+    def equivalents(self):
+        # a delay common to all channels commutes with G: actuator side = sensor side
+        return ("sensor-side delay of the same length on all four sensors",)
 
     def physical(self, draws, ctx):
         return {"delay_s": (np.clip(draws[:, 0], 0.0, None) * 1e-3, "s")}
@@ -386,6 +403,43 @@ class SensorGain(Candidate):
 
     def describe(self, values):
         return f"sensor gain error {100 * values['gain']:+.1f} % on channel {self.location}"
+
+
+@dataclass(frozen=True)
+class BearingCoefficient(Candidate):
+    """A stiffness or damping coefficient of the nominal model that was left out of the fit
+    (``location`` is its name, e.g. k_Ax): before any physics is blamed, the nominal model
+    with that coefficient freed is tried. Sampled: theta (null 0), the parameter's default
+    prior, through its LFT column (eqs. 48-52)."""
+
+    nominal_family = True
+    fingerprint = ("a frequency-dependent change of the loop at one bearing axis, like the "
+                   "fitted coefficients'")
+
+    def params(self, ctx):
+        return (EffectParam(self.location, default_prior(self.location), 0.0, "-"),)
+
+    def lft_names(self):
+        return (self.location,)
+
+    def physical(self, draws, ctx):
+        spec = get_spec(self.location)
+        scale = spec.physical_scale(ctx.rig)
+        return {"value": (draws[:, 0] * scale, spec.unit)}
+
+    def describe(self, values):
+        return (f"{self.location} differs from nominal by {values['value']:.3g} "
+                "(a coefficient left out of the fit)")
+
+
+BEARING_COEFFICIENTS = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
+"""The eight bearing coefficients the diagnosis fits by default."""
+
+
+def left_out_coefficients(fitted: tuple[str, ...]) -> tuple[Candidate, ...]:
+    """A BearingCoefficient candidate for every bearing coefficient not in ``fitted``."""
+    return tuple(BearingCoefficient("bearing_coefficient", n) for n in BEARING_COEFFICIENTS
+                 if n not in fitted)
 
 
 def all_candidates() -> tuple[Candidate, ...]:

@@ -1,14 +1,18 @@
 """Diagnosis of a recording: the Python API behind ``bayes-amb diagnose``.
 
     rec = load_recording("realistic.csv")
-    d = diagnose(rec, "k_By,c_By")
+    d = diagnose(rec)                  # all eight bearing coefficients fitted
     d.report["mismatch"]["detected"], [e["effect"] for e in d.report["explanations"]]
     d.save("runs/realistic_diag")      # diagnosis.json, residuals.nc, models/*.nc
 
-Steps: the nominal model is fitted over the whole band (noise-marginalised Whittle
-likelihood); its residual is located (locate.py); candidate physics is screened, fitted and
-accepted greedily by Bayes factor (select.py); the fit before and after is compared. The
-recording's ``truth`` (if simulated) is never read here.
+Steps: the data are checked and record habits removed (checks.py: controller consistency,
+start at rest, offsets and drift, excitation); the nominal model (by default with all eight
+bearing coefficients free) is fitted over the whole band (noise-marginalised Whittle
+likelihood); its residual is located (locate.py); left-out coefficients, then candidate
+physics, are screened, fitted and accepted greedily by Bayes factor (select.py); the
+chosen model's residual is located again, and what it still leaves is reported as
+unexplained, with a nonparametric estimate (unexplained.py); the fit before and after is
+compared. The recording's ``truth`` (if simulated) is never read here.
 """
 
 from __future__ import annotations
@@ -23,7 +27,13 @@ import numpy as np
 import xarray as xr
 
 from bayes_amb import __version__
-from bayes_amb.discrepancy.candidates import Candidate, all_candidates
+from bayes_amb.discrepancy.candidates import (
+    BEARING_COEFFICIENTS,
+    Candidate,
+    all_candidates,
+    left_out_coefficients,
+)
+from bayes_amb.discrepancy.checks import DataChecks, run_checks
 from bayes_amb.discrepancy.fitstats import (
     draws,
     effect_summaries,
@@ -41,6 +51,7 @@ from bayes_amb.discrepancy.select import (
     select,
 )
 from bayes_amb.discrepancy.story import plain_language
+from bayes_amb.discrepancy.unexplained import unexplained_block
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
@@ -175,30 +186,62 @@ def _sample(fm: FittedModel, steps: int, seed: int) -> None:
     fm.samples = run.samples
 
 
-def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] = "k_By,c_By",
+def _loop_poles(fwd: ForwardModel) -> np.ndarray:
+    """Discrete poles of the nominal x -> eps system (S at theta = 0)."""
+    A, _, _ = fwd.excitation_system(np.zeros((1, len(fwd.params))))
+    return np.linalg.eigvals(A[0])
+
+
+def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
+             unexplained: dict[str, Any]) -> str:
+    if checks.failed:
+        return "data check failed"
+    if unexplained["present"]:
+        return "partly explained" if accepted else "unexplained"
+    if accepted:
+        return "explained"
+    return "mismatch, unexplained" if loc.detected and any(
+        f["test"] not in ("floor", "whiteness") for f in loc.findings) else "no mismatch"
+
+
+def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | None = None,
              priors: dict[str, Prior] | None = None,
              options: DiagnoseOptions | None = None) -> Diagnosis:
-    """Locate, explain and model the discrepancy between a recording and the nominal model."""
+    """Locate, explain and model the discrepancy between a recording and the nominal model.
+
+    params: the bearing coefficients fitted in the nominal model (default: all eight, k_Ax
+    .. c_By); any left out is itself a candidate, tried before any physics.
+    """
     opt = options or DiagnoseOptions()
     t0 = time.perf_counter()
-    names = parse_param_list(params)
+    names = parse_param_list(",".join(BEARING_COEFFICIENTS) if params is None else params)
     say = opt.progress or (lambda _: None)
     fwd = ForwardModel(recording, names)
-    eps = dual_youla_eps(fwd.parts, np.asarray(recording.y), np.asarray(recording.u))
+    say("checking the data")
+    checks = run_checks(recording, _loop_poles(fwd))
+    eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
     say("fitting the nominal model over the whole band")
-    nominal = fit_nominal(recording, names, eps, priors, seed=opt.seed)
+    nominal = fit_nominal(recording, names, eps, priors, seed=opt.seed, start=checks.start)
     if not np.isfinite(nominal.log_post):
         raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
                             "likelihood anywhere in the prior range")
     say("locating the mismatch")
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=opt.seed))
+    pool = (*left_out_coefficients(names), *opt.candidates)
     sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
-                            max_effects=opt.max_effects, candidates=opt.candidates)
+                            max_effects=0 if checks.failed else opt.max_effects,
+                            candidates=pool)
     sel = select(nominal, sel_opt, priors, progress=say)
     if sel.accepted:
         say("refitting the chosen model with its own noise filters")
         sel.final = sel.accepted[-1] = own_noise_fit(sel.final)
+        say("locating what the chosen model still leaves")
+        final_loc = locate(sel.final.like, sel.final.params, sel.final.log10_sigma,
+                           sel.final.cov, LocateOptions(seed=opt.seed))
+    else:
+        final_loc = loc
+    unexplained = unexplained_block(final_loc, sel.final)
     if opt.sample:
         for i, fm in enumerate({id(m): m for m in (nominal, sel.final)}.values()):
             say(f"sampling the posterior of model {i + 1}")
@@ -207,9 +250,14 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] = "
     after = fit_quality(sel.final, eps)
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(sel.final, seed=opt.seed)
     effects = effect_summaries(sel.final, s_fin)
+    confidence = "tentative" if unexplained["present"] else "confident"
     explanations = []
     for fm, eff in zip(sel.accepted, effects, strict=True):
+        cand = fm.candidates[-1]
         explanations.append({**eff, "score": fm.log_bf,
+                             "kind": "model" if cand.nominal_family else "physics",
+                             "equivalence_class": [cand.key, *cand.equivalents()],
+                             "confidence": confidence,
                              "evidence": f"log Bayes factor {fm.log_bf:.1f} against the model "
                                          "without it"})
     mismatch = loc.to_dict()
@@ -222,14 +270,22 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] = "
         mismatch.update(detected=True, channels=imp["channels"], bands_hz=imp["bands_hz"])
         mismatch["evidence"] = {**mismatch["evidence"], "strength": "model comparison",
                                 "log_bayes_factor": sel.accepted[0].log_bf}
+    source = Path(recording.source)
     report: dict[str, Any] = {
         "format": "bayes-amb-diagnosis/1",
         "package_version": __version__,
-        "recording": str(Path(recording.source).resolve()) if Path(recording.source).is_file()
-        else recording.source,
+        "recording": source.name,
         "parameters_estimated": list(names),
+        "checks": checks.to_list(),
+        "record_window": {"start_s": checks.start * recording.dt,
+                          "at_rest": checks.at_rest,
+                          "meaning": "samples before start_s drive the model but are not "
+                                     "compared (start-up transient of a record that does "
+                                     "not start at rest, or of removed offsets)"},
+        "verdict": _verdict(checks, loc, sel.accepted, unexplained),
         "mismatch": mismatch,
         "explanations": explanations,
+        "unexplained": unexplained,
         "candidates": sel.scores,
         "fit": {"before": {k: before[k] for k in ("nrmse", "whiteness_p")},
                 "after": {k: after[k] for k in ("nrmse", "whiteness_p")},

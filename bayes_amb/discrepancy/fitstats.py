@@ -113,8 +113,9 @@ def fit_quality(fitted: FittedModel, eps: NDArray) -> dict[str, Any]:
     """Per channel: NRMSE = RMS(eps - eps_pred) / RMS(eps), and the Ljung-Box p-value of the
     residual whitened by the model's own fitted noise spectrum."""
     r = eps - predict(fitted)
-    nrmse = np.sqrt(np.mean(r**2, axis=0) / np.mean(eps**2, axis=0))
     like = fitted.like
+    w = slice(getattr(like, "start", 0), None)          # the compared window
+    nrmse = np.sqrt(np.mean(r[w] ** 2, axis=0) / np.mean(eps[w] ** 2, axis=0))
     like.set_noise_reference(fitted.params)
     R = like.residual_dft(fitted.params[None])[0][0]
     W = whiten(noise_cholesky(like, fitted.log10_sigma), R)

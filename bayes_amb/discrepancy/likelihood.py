@@ -28,6 +28,17 @@ residual correlated with the excitation or a line still costs its full price. Ev
 residuals and robust to the noise model's shape.
 
 Deterministic lines (unbalance) enter the mean through precomputed basis responses.
+
+Pre-history. With ``start`` > 0 only the window [start, N) of the record is compared: the
+first samples drive the model (its state at ``start`` is exact, since the excitation is
+known from sample 0) but their residual is not used. For a stable system with state s at
+the window's first sample and s_N after its last, the window's DFT on the grid z_k is
+
+    DFT(y)_k = C (z_k I - A)^-1 [B X_k + z_k (s - s_N)],
+
+so the pre-history costs one more modal state per evaluation. This keeps the start-up
+transient of a record that begins mid-operation (and of removed offsets) out of the
+likelihood (checks.py).
 """
 
 from __future__ import annotations
@@ -40,7 +51,7 @@ from scipy.signal import lfilter
 from scipy.special import gammaln
 
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference.forward import dft_response
+from bayes_amb.inference.forward import dft_response, final_modal_state
 from bayes_amb.inference.whittle import WhittleLikelihood
 
 P_CH = 4
@@ -65,8 +76,12 @@ class RobustWhittle(WhittleLikelihood):
     (nb, p + q) and log10 sigma (nb, 3)."""
 
     def __init__(self, forward: ExtendedForwardModel, eps: NDArray, n_bands: int = 192,
-                 prior_weight: float = 1.0, noise_filters: NDArray | None = None):
+                 prior_weight: float = 1.0, noise_filters: NDArray | None = None,
+                 start: int = 0):
         self.prior_weight = prior_weight
+        self.start = int(start)
+        self._eps_full = np.asarray(eps, dtype=float)
+        eps = self._eps_full[self.start:]
         self.lines: list[NDArray] = []
         self.fixed_filters = noise_filters
         super().__init__(forward, eps, n_bands=n_bands, f_max_hz=None, noise_model="loop")
@@ -74,6 +89,27 @@ class RobustWhittle(WhittleLikelihood):
         self.shift = scale_shift(self.counts)
         self._gamma_term = (log_complex_gamma(self.nu + self.counts)
                             - log_complex_gamma(self.nu))
+
+    def _apply_prefilter(self) -> None:
+        """Filter eps and x over the whole record (from rest), DFT the window [start, N)."""
+        w = self.prefilter
+        x_w = lfilter(w, [1.0], self.forward.x, axis=0)
+        eps_w = lfilter(w, [1.0], self._eps_full, axis=0)[self.start:]
+        self.x_w = x_w                                  # the whole record drives the model
+        self.x_pre = x_w[:self.start]
+        self.x_window = np.asarray(self.forward.x, dtype=float)[self.start:]
+        self.E = np.fft.rfft(eps_w / self.scale, axis=0)[self.k]
+        self.X = np.fft.rfft(x_w[self.start:], axis=0)[self.k]
+        self.w_gain2 = np.abs(np.polyval(w[::-1], 1.0 / self.z)) ** 2
+
+    def prediction_dft(self, P: NDArray) -> tuple[NDArray, NDArray]:
+        """DFT of S(theta) x over the window (scaled), and the stability mask, for a batch
+        of parameter rows P (nb, p + q); lines not included."""
+        mb, xi = self.forward.modal(P, self.x_w)
+        if self.start:
+            lam_s = np.where(mb.stable[:, None], mb.lam, 0.0)
+            xi = xi - final_modal_state(lam_s, mb.Bm, self.x_pre)
+        return dft_response(mb, self.X, self.z, xi) / self.scale, mb.stable
 
     def for_model(self, forward: ExtendedForwardModel, theta_ref: NDArray) -> RobustWhittle:
         """The same data, bands and prewhitening for another model of the same recording,
@@ -101,17 +137,18 @@ class RobustWhittle(WhittleLikelihood):
         self.lines = []
         for resp in fwd.line_responses(np.atleast_2d(theta_ref)):
             filt = lfilter(self.prefilter, [1.0], resp, axis=0)
-            self.lines.append(np.fft.rfft(filt / self.scale, axis=0)[self.k])  # (nf, 4, 2)
+            self.lines.append(np.fft.rfft(filt[self.start:] / self.scale,
+                                          axis=0)[self.k])                   # (nf, 4, 2)
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         P = np.atleast_2d(theta)
-        mb, xi = self.forward.modal(P, self.x_w)
-        R = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
+        Y, stable = self.prediction_dft(P)
+        R = self.E[None] - Y
         fwd: ExtendedForwardModel = self.forward  # type: ignore[assignment]
         for c, basis in zip(fwd.line_candidates, self.lines, strict=True):
             ab = P[:, fwd.slices[fwd.candidates.index(c)]]             # (nb, 2)
             R = R - np.einsum("kcj,bj->bkc", basis, ab)
-        return R, mb.stable
+        return R, stable
 
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         theta = np.atleast_2d(theta)

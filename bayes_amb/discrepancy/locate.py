@@ -8,7 +8,9 @@ coherence   per frequency band and channel, the residual DFT regressed on the ex
             (complex regression: F(8, 2(n_b - 4)) under the null). Only needs the noise to
             be locally white within a band, not the noise model to be right.
 lines       per channel, each bin of the residual periodogram against a running median of
-            its neighbours (exponential null); lines at 1x the running speed are marked.
+            its neighbours (exponential null); only lines at 1x the running speed count
+            as a mismatch; other lines (mains, neighbouring machines) are measurement
+            habits: reported under ``lines`` and kept out of the floor/whiteness tests.
 floor       per band, the residual whitened by the fitted noise spectrum against its
             expected power (Gamma null): excess power the noise model does not explain.
 whiteness   Ljung-Box on the whitened residual of each channel (Ljung, ch. 16).
@@ -36,7 +38,6 @@ from scipy.ndimage import median_filter
 
 from bayes_amb.control.discrete import ss_freqresp
 from bayes_amb.discrepancy.likelihood import RobustWhittle
-from bayes_amb.inference.forward import dft_response
 from bayes_amb.rig import CHANNELS
 
 ALPHA = 0.01
@@ -181,29 +182,46 @@ def _xcorr(e: NDArray, x: NDArray, lags: int) -> tuple[NDArray, NDArray]:
     return out, stats.chi2.sf(q, lags + 1)
 
 
-def _lines(W: NDArray, like: RobustWhittle, f_rot: float) -> tuple[list[dict[str, Any]],
-                                                                    NDArray]:
+SPEED_TOLERANCE = 0.01
+"""Relative tolerance of the running speed written in a recording (lines within it of 1x
+count as synchronous)."""
+
+
+def _lines(W: NDArray, like: RobustWhittle, f_rot: float
+           ) -> tuple[list[dict[str, Any]], float, NDArray]:
     """Bins of the whitened residual W whose power stands out of a running median of 51
-    bins (exponential null: the median of Exp(1) is ln 2); Bonferroni p-values."""
+    bins (exponential null: the median of Exp(1) is ln 2); Bonferroni p-values.
+
+    Returns the lines found (each marked synchronous or not), the smallest p-value among
+    bins at 1x the running speed (within SPEED_TOLERANCE; the only lines physics can
+    explain: unbalance, runout), and a mask (nf,) of the bins of the other lines:
+    measurement lines (mains, a neighbouring machine) that are a habit of the record, not
+    rotor physics. They are reported and kept out of the floor and whiteness tests.
+    """
     P = np.abs(W) ** 2
     med = median_filter(P, size=(51, 1), mode="reflect") / np.log(2)
     ratio = P / np.maximum(med, 1e-300)
     n_tests = ratio.size
     p_bin = np.minimum(1.0, np.exp(-ratio) * n_tests)
-    freq = like.k / (like.n * like.forward.dt)
-    found = []
+    df = 1.0 / (like.n * like.forward.dt)
+    freq = like.k * df
+    alias = _alias(f_rot, 1.0 / like.forward.dt)
+    sync_bin = np.abs(freq - alias) <= max(2.0 * df, SPEED_TOLERANCE * f_rot)
+    found: list[dict[str, Any]] = []
+    nuisance = np.zeros(freq.size, dtype=bool)
     sig = np.flatnonzero(np.min(p_bin, axis=1) < ALPHA)
     for i in sig:
-        if found and freq[i] - found[-1]["freq_hz"] <= 1.5 / (like.n * like.forward.dt):
+        if not sync_bin[i]:
+            nuisance[max(i - 1, 0):i + 2] = True
+        if found and freq[i] - found[-1]["freq_hz"] <= 1.5 * df:
             continue                                           # one line per cluster
         chans = [CHANNELS[c] for c in range(4) if p_bin[i, c] < ALPHA]
-        alias = _alias(f_rot, 1.0 / like.forward.dt)
         found.append({"freq_hz": float(freq[i]), "channels": chans,
                       "p_value": float(np.min(p_bin[i])),
                       "power_ratio": float(np.max(ratio[i])),
-                      "synchronous": bool(abs(freq[i] - alias) <= 2.0 / (like.n
-                                                                          * like.forward.dt))})
-    return found, float(np.min(p_bin)) if p_bin.size else 1.0
+                      "synchronous": bool(sync_bin[i])})
+    p_sync = float(np.min(p_bin[sync_bin])) if np.any(sync_bin) else 1.0
+    return found, p_sync, nuisance
 
 
 def _alias(f: float, fs: float) -> float:
@@ -230,9 +248,8 @@ def _ppc(like: RobustWhittle, P_hat: NDArray, cov: NDArray | None, L: NDArray,
     draws = np.tile(P_hat, (opt.n_ppc, 1))
     if cov is not None:
         draws = rng.multivariate_normal(P_hat, cov[:p, :p], size=opt.n_ppc)
-    mb, xi = like.forward.modal(np.vstack([P_hat, draws]), like.x_w)
-    Y = dft_response(mb, like.X, like.z, xi) / like.scale
-    ok = mb.stable[1:]
+    Y, stable = like.prediction_dft(np.vstack([P_hat, draws]))
+    ok = stable[1:]
     t_coh, t_pow = [], []
     for j in np.flatnonzero(ok):
         w = (rng.normal(size=(like.z.size, 4))
@@ -264,16 +281,18 @@ def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
     coh, coh_p = _coherence(R, like.X, bands)
     L = noise_cholesky(like, log10_sigma)
     W = whiten(L, R)
-    pow_b = np.array([np.sum(np.abs(W[b]) ** 2, axis=0) for b in bands])   # (nb, 4)
-    counts = np.array([b.size for b in bands])
+    f_rot = like.forward.recording.speed_rpm / 60.0
+    lines, line_p, nuisance = _lines(W, like, f_rot)
+    keep = ~nuisance
+    W_clean = np.where(keep[:, None], W, 0.0)          # measurement lines kept out
+    pow_b = np.array([np.sum(np.abs(W_clean[b]) ** 2, axis=0) for b in bands])  # (nb, 4)
+    counts = np.array([max(int(keep[b].sum()), 1) for b in bands])
     floor_ratio = pow_b / counts[:, None]
     floor_p = stats.gamma.sf(pow_b.sum(axis=1), 4 * counts)
-    e = whitened_series(W, like.k, like.n)
+    e = whitened_series(W_clean, like.k, like.n)
     ac, lb_p = ljung_box(e, opt.lb_lags)
-    xs = like.forward.x
+    xs = like.x_window
     xc, xc_p = _xcorr(e, xs, opt.xcorr_lags)
-    f_rot = like.forward.recording.speed_rpm / 60.0
-    lines, line_p = _lines(W, like, f_rot)
     win_p, window = _windows(e, opt.n_windows, like.forward.dt)
     families = {"coherence": coh_p.ravel(), "floor": floor_p, "whiteness": lb_p,
                 "crosscorr": xc_p.ravel(), "lines": np.array([line_p]), "windows": win_p}
@@ -300,7 +319,7 @@ def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
                          "power_ratio": float(floor_ratio[b].mean()),
                          "p_adjusted": float(adj_f["floor"][b])})
     if adj_f["lines"][0] < ALPHA:
-        for ln in lines:
+        for ln in (ln for ln in lines if ln["synchronous"]):
             findings.append({"test": "line", "band_hz": [ln["freq_hz"], ln["freq_hz"]],
                              "channels": ln["channels"], "synchronous": ln["synchronous"],
                              "p_adjusted": float(adj_f["lines"][0])})

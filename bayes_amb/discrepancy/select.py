@@ -101,11 +101,12 @@ class FittedModel:
 
 
 def build(recording: Recording, params: tuple[str, ...], eps: NDArray,
-          candidates: tuple[Candidate, ...] = (), priors: dict[str, Prior] | None = None
-          ) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
-    """Forward model, likelihood and posterior of the nominal model plus candidates."""
+          candidates: tuple[Candidate, ...] = (), priors: dict[str, Prior] | None = None,
+          start: int = 0) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
+    """Forward model, likelihood and posterior of the nominal model plus candidates
+    (``start``: samples of pre-history, see likelihood.RobustWhittle)."""
     fwd = ExtendedForwardModel(recording, params, candidates, priors)
-    like = RobustWhittle(fwd, eps)
+    like = RobustWhittle(fwd, eps, start=start)
     return fwd, like, LogPosterior(like, fwd.priors)
 
 
@@ -132,9 +133,10 @@ def local_fit(post: LogPosterior, x0: NDArray, maxiter: int = 300) -> tuple[NDAr
 
 
 def fit_nominal(recording: Recording, params: tuple[str, ...], eps: NDArray,
-                priors: dict[str, Prior] | None = None, seed: int = 0) -> FittedModel:
+                priors: dict[str, Prior] | None = None, seed: int = 0,
+                start: int = 0) -> FittedModel:
     """The nominal model's MAP (multi-start, as in identification) over the whole band."""
-    fwd, like, post = build(recording, params, eps, (), priors)
+    fwd, like, post = build(recording, params, eps, (), priors, start)
     m = find_map(post, seed=seed)
     x = np.concatenate([m.theta, m.log10_sigma])
     # from here on the noise filters stay at this fit (shared with the extended models)
@@ -295,53 +297,73 @@ class Selection:
     scores: list[dict[str, Any]]
 
 
+def _try(current: FittedModel, pool: list[Candidate], rnd: int, opt: SelectOptions,
+         priors: dict[str, Prior] | None, progress: Callable[[str], None] | None,
+         scores: list[dict[str, Any]]) -> FittedModel | None:
+    """Screen a pool on top of ``current``, fit the best few fully, record every score and
+    return the best refined model (None if none was refined)."""
+    if progress:
+        progress(f"round {rnd}: screening {len(pool)} candidates")
+    screens = [screen(current, c, priors) for c in pool]
+    screens.sort(key=lambda s: -s.gain)
+    refined: list[FittedModel] = []
+    for sc in screens[:opt.n_refine]:
+        if sc.gain < opt.screen_min:
+            break
+        if progress:
+            progress(f"round {rnd}: fitting {sc.candidate.key}")
+        fm = refine(current, sc, priors)
+        if isinstance(sc.candidate, Unbalance):
+            # the record may begin with the rotor already in synchronous steady state
+            alt = refine(current, Screen(replace(sc.candidate, start="steady"), sc.gain,
+                                         sc.phi), priors)
+            if (alt.log_bf or -np.inf) > (fm.log_bf or -np.inf):
+                fm = alt
+        refined.append(fm)
+    by_key = {f.candidates[-1].key: f for f in refined}
+    for sc in screens:
+        f = by_key.get(sc.candidate.key)
+        scores.append({"effect": sc.candidate.effect, "location": sc.candidate.location,
+                       "round": rnd, "screen_gain": _num(sc.gain),
+                       "log_bayes_factor": None if f is None else _num(f.log_bf),
+                       "fingerprint": sc.candidate.fingerprint})
+    if not refined:
+        return None
+    return max(refined, key=lambda f: f.log_bf if f.log_bf is not None else -np.inf)
+
+
 def select(nominal: FittedModel, options: SelectOptions | None = None,
            priors: dict[str, Prior] | None = None,
            progress: Callable[[str], None] | None = None) -> Selection:
-    """Greedy forward selection of candidate physics on top of the nominal fit."""
+    """Greedy forward selection of candidate physics on top of the nominal fit.
+
+    In every round the nominal model's own left-out coefficients (``nominal_family``
+    candidates) are tried first; physics is tried only when none of them is accepted.
+    """
     opt = options or SelectOptions()
     current = nominal
     accepted: list[FittedModel] = []
     scores: list[dict[str, Any]] = []
     for rnd in range(1, opt.max_effects + 1):
-        used = {c.effect for c in current.candidates}
+        used = {c.key if c.nominal_family else c.effect for c in current.candidates}
         sampled = any(c.own_sampling for c in current.candidates)
-        pool = [c for c in opt.candidates if c.effect not in used
+        pool = [c for c in opt.candidates
+                if (c.key if c.nominal_family else c.effect) not in used
                 and not (sampled and c.own_sampling)]
-        if not pool:
-            break
-        if progress:
-            progress(f"round {rnd}: screening {len(pool)} candidates")
-        screens = [screen(current, c, priors) for c in pool]
-        screens.sort(key=lambda s: -s.gain)
-        refined: list[FittedModel] = []
-        for sc in screens[:opt.n_refine]:
-            if sc.gain < opt.screen_min:
+        chosen = None
+        for group in ([c for c in pool if c.nominal_family],
+                      [c for c in pool if not c.nominal_family]):
+            if not group:
+                continue
+            best = _try(current, group, rnd, opt, priors, progress, scores)
+            if best is not None and best.log_bf is not None \
+                    and best.log_bf > opt.log_bf_threshold:
+                chosen = best
                 break
-            if progress:
-                progress(f"round {rnd}: fitting {sc.candidate.key}")
-            fm = refine(current, sc, priors)
-            if isinstance(sc.candidate, Unbalance):
-                # the record may begin with the rotor already in synchronous steady state
-                alt = refine(current, Screen(replace(sc.candidate, start="steady"), sc.gain,
-                                             sc.phi), priors)
-                if (alt.log_bf or -np.inf) > (fm.log_bf or -np.inf):
-                    fm = alt
-            refined.append(fm)
-        by_key = {f.candidates[-1].key: f for f in refined}
-        for sc in screens:
-            f = by_key.get(sc.candidate.key)
-            scores.append({"effect": sc.candidate.effect, "location": sc.candidate.location,
-                           "round": rnd, "screen_gain": _num(sc.gain),
-                           "log_bayes_factor": None if f is None else _num(f.log_bf),
-                           "fingerprint": sc.candidate.fingerprint})
-        if not refined:
+        if chosen is None:
             break
-        best = max(refined, key=lambda f: f.log_bf if f.log_bf is not None else -np.inf)
-        if best.log_bf is None or best.log_bf <= opt.log_bf_threshold:
-            break
-        accepted.append(best)
-        current = best
+        accepted.append(chosen)
+        current = chosen
     return Selection(nominal=nominal, final=current, accepted=accepted, scores=scores)
 
 

@@ -25,12 +25,37 @@ def _tests(findings: list[dict[str, Any]]) -> str:
     return ", ".join(names[t] for t in seen)
 
 
+def _unexplained(report: dict[str, Any]) -> str:
+    un = report.get("unexplained") or {}
+    if not un.get("present"):
+        return ""
+    where = f"on channel(s) {', '.join(un['channels'])}" + (
+        f", in {_bands(un['bands_hz'])}" if un["bands_hz"] else "")
+    expl = report["explanations"]
+    tail = (" The effects named above fit part of it and are therefore only tentative."
+            if expl else "")
+    return (f"Unexplained: the best model still leaves structure coherent with the excitation "
+            f"{where}; no model in the library explains it (see 'unexplained.estimate' for the "
+            f"frequency response of the missing dynamics as an output-multiplicative error)."
+            + tail)
+
+
 def plain_language(report: dict[str, Any]) -> str:
     """One paragraph from the numbers of a diagnosis.json report."""
     mm = report["mismatch"]
     expl = report["explanations"]
+    checks = report.get("checks", [])
+    failed = [c["line"] for c in checks if not c["ok"]]
+    if failed:
+        return ("The data failed a check, so no physics is named: " + "; ".join(failed)
+                + ".")
+    habits = [c["line"] for c in checks if c["check"] in ("offsets", "start")
+              and ("removed" in c["line"] or "mid-operation" in c["line"])]
+    prefix = ("Record habits handled as nuisance, not physics: " + "; ".join(habits) + ". "
+              if habits else "")
+    unexpl = _unexplained(report)
     if not mm["detected"] and not expl:
-        return ("No mismatch: the residual of the nominal model is consistent with the "
+        return prefix + ("No mismatch: the residual of the nominal model is consistent with the "
                 "fitted noise (no excitation-coherent band, no line, whiteness and "
                 f"cross-correlation tests pass at a family-wise {100 * mm['evidence']['alpha']:g} "
                 "% level), and no candidate physics improves the fit enough to be named.")
@@ -38,7 +63,7 @@ def plain_language(report: dict[str, Any]) -> str:
              + (f", in {_bands(mm['bands_hz'])}" if mm["bands_hz"] else "")
              + (f", between {mm['time_s'][0]:.2f} and {mm['time_s'][1]:.2f} s"
                 if mm["time_s"] else ""))
-    text = []
+    text = [prefix.strip()] if prefix else []
     if mm["detected"]:
         text.append(f"The nominal model does not explain this recording: "
                     f"{_tests(mm['findings'])} {where} (evidence "
@@ -70,8 +95,10 @@ def plain_language(report: dict[str, Any]) -> str:
         if bound:
             text.append(f"With the nominal model {', '.join(bound)} sat on its prior bound, "
                         "absorbing the missing physics; with it added it no longer does.")
-    else:
+    elif not unexpl:
         text.append("None of the candidate physics (actuator lag, time delay, cross-coupling, "
-                    "flexible modes, unbalance, sensor gain) explains it: the model is wrong "
-                    "in a way outside the library, or the noise is not as modelled.")
+                    "flexible modes, unbalance, sensor gain) explains it, and what is left is "
+                    "not coherent with the excitation: the noise is not as modelled.")
+    if unexpl:
+        text.append(unexpl)
     return " ".join(text)

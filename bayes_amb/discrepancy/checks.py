@@ -1,0 +1,262 @@
+"""Checks of the data before any physics is blamed, and the removal of record habits.
+
+A real recording breaks the simulator's habits: the sensors have offsets, the record starts
+while the rotor is running, the firmware may not be the documented controller. None of that
+is rotor physics, and none of it may be named as such. Each check here reports in one line;
+a failed check is reported as such (the diagnosis then names no physics, see diagnose.py).
+
+controller   Is the recorded u what the documented controller makes from the recorded y
+             and excitation? The controller file is run from rest on [y + r1; eta]; the
+             difference to the recorded u must be at rounding level once the controller's
+             own initial state has died out (METHOD.md section 8: x = Vt u - Ut y equals
+             eta only for the documented controller).
+start        Does the record start at rest? If the difference above is large in the first
+             samples and then dies out, the controller (and so the loop) was running before
+             the record began.
+offsets      Sensor offsets and slow drift: the mean and linear trend of each y and u channel
+             against the standard error of a mean of that series (batch means). They are
+             removed from y and u before eps = Mt y - Nt u is formed (eps is linear in y and
+             u, so this removes their response except for its start-up transient).
+excitation   Is there an excitation to identify from, on which channels?
+
+Whenever the record does not start at rest or a trend was removed, the start-up transient
+of the eps filter and of S(theta) from its unknown initial state is kept out of the
+likelihood: the first ``start`` samples become *pre-history* (the model is driven by the
+excitation from sample 0, so its state at ``start`` is exact; only the bins of the window
+[start, N) are compared; see likelihood.RobustWhittle). ``start`` follows from the slowest
+pole of the nominal loop (decay to 1e-3).
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import stats
+from scipy.signal import detrend
+
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.io.recording import Recording
+from bayes_amb.rig import CHANNELS
+
+CONTROLLER_TOL = 1e-4
+"""Relative RMS difference between recorded and re-computed u at the first samples below
+which the record counts as starting at rest (CSV at full precision gives ~1e-15)."""
+
+CONTROLLER_SHARE = 1e-6
+"""Share of the power of u that may follow the excitation in u - K(y, eta) before the
+documented controller counts as not the one that ran (a 0.1 % gain change gives ~1e-6)."""
+
+DECAY = 1e-3
+"""Start-up transients are kept out until the slowest loop pole has decayed by this factor."""
+
+MAX_START_SHARE = 0.2
+"""At most this share of the record is used as pre-history."""
+
+
+@dataclass(frozen=True)
+class Check:
+    """One data check: name, ok, and one line saying what was found."""
+
+    name: str
+    ok: bool
+    line: str
+    values: dict[str, Any] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"check": self.name, "ok": self.ok, "line": self.line, **self.values}
+
+
+@dataclass(frozen=True)
+class DataChecks:
+    """All checks of a recording, the cleaned signals and the pre-history length.
+
+    y, u: the recorded signals with significant offsets/trends removed (N, 4); start: the
+    first sample of the compared window; at_rest: whether the record starts at rest;
+    failed: names of the checks that failed (the diagnosis names no physics then).
+    """
+
+    checks: tuple[Check, ...]
+    y: NDArray
+    u: NDArray
+    start: int
+    at_rest: bool
+
+    @property
+    def failed(self) -> list[str]:
+        return [c.name for c in self.checks if not c.ok]
+
+    def to_list(self) -> list[dict[str, Any]]:
+        return [c.to_dict() for c in self.checks]
+
+
+def _controller_inputs(rec: Recording) -> NDArray:
+    y = np.asarray(rec.y, dtype=float)
+    r1 = rec.excitation.get("r1")
+    eta = rec.excitation.get("eta")
+    v = np.zeros((y.shape[0], 8))
+    v[:, :4] = y if r1 is None else y + np.asarray(r1)
+    if eta is not None:
+        v[:, 4:] = eta
+    return v
+
+
+def recompute_u(rec: Recording) -> NDArray:
+    """The documented controller run from rest on the recorded [y + r1; eta]: u (N, 4)."""
+    ctrl = rec.controller
+    v = _controller_inputs(rec)
+    A, B, C, D = (np.asarray(m, dtype=float) for m in (ctrl.A, ctrl.B, ctrl.C, ctrl.D))
+    Cu, Du = C[:4], D[:4]
+    xs = np.zeros(A.shape[0])
+    out = np.empty((v.shape[0], 4))
+    drive = v @ B.T
+    feed = v @ Du.T
+    for k in range(v.shape[0]):
+        out[k] = Cu @ xs + feed[k]
+        xs = A @ xs + drive[k]
+    return out
+
+
+def settle_samples(poles: NDArray, n: int, decay: float = DECAY) -> int:
+    """Samples until the slowest of the discrete poles has decayed by ``decay``, capped at
+    MAX_START_SHARE of the record n."""
+    rho = float(np.max(np.abs(poles))) if np.size(poles) else 0.0
+    rho = min(max(rho, 1e-6), 1 - 1e-9)
+    return int(min(np.ceil(np.log(decay) / np.log(rho)), MAX_START_SHARE * n))
+
+
+def _batch_se(v: NDArray, n_batches: int = 20) -> NDArray:
+    """Standard error of the mean of each column of v by batch means (robust to colour)."""
+    m = v.shape[0] // n_batches * n_batches
+    means = v[:m].reshape(n_batches, -1, v.shape[1]).mean(axis=1)
+    return means.std(axis=0, ddof=1) / np.sqrt(n_batches)
+
+
+def check_excitation(rec: Recording) -> Check:
+    """Which excitation channels carry a signal; refuses a recording with none."""
+    rms = {g: np.sqrt(np.mean(np.asarray(v) ** 2, axis=0)) for g, v in rec.excitation.items()}
+    live = {g: [c for c, r in zip(CHANNELS, v, strict=True) if r > 0] for g, v in rms.items()}
+    if not any(live.values()):
+        groups = "/".join(rec.excitation)
+        raise BayesAmbError(f"recording {rec.source}: field {groups}: the excitation is zero on "
+                            "every channel: nothing to identify from")
+    parts = [f"{g} on {','.join(ch)} (rms {np.max(rms[g]):.3g})" for g, ch in live.items() if ch]
+    return Check("excitation", True, "excitation present: " + "; ".join(parts),
+                 {"rms": {g: [float(x) for x in v] for g, v in rms.items()}})
+
+
+def _coherent_share(d: NDArray, x: NDArray, u: NDArray, min_bins: int = 32
+                    ) -> tuple[float, float]:
+    """Share of the power of u that a per-band linear regression of d on the excitation x
+    explains, and the smallest Holm-adjusted F-test p-value of that regression."""
+    D, X = np.fft.rfft(d, axis=0)[1:], np.fft.rfft(x, axis=0)[1:]
+    U = np.fft.rfft(u - u.mean(axis=0), axis=0)[1:]
+    m = X.shape[1]
+    n_b = max(1, D.shape[0] // max(min_bins, 2 * m + 2))
+    edges = np.linspace(0, D.shape[0], n_b + 1).astype(int)
+    p, expl = [], 0.0
+    for lo, hi in itertools.pairwise(edges):
+        Xb, Db = X[lo:hi], D[lo:hi]
+        beta, *_ = np.linalg.lstsq(Xb, Db, rcond=None)
+        fit = Xb @ beta
+        ss1 = np.sum(np.abs(Db - fit) ** 2, axis=0)
+        ss0 = np.sum(np.abs(Db) ** 2, axis=0)
+        F = ((ss0 - ss1) / m) / np.maximum(ss1 / (hi - lo - m), 1e-300)
+        p.append(stats.f.sf(F, 2 * m, 2 * (hi - lo - m)))
+        expl += float(np.sum(np.abs(fit) ** 2))
+    p_adj = float(np.min(np.minimum(1.0, np.concatenate(p) * len(p) * 4)))
+    return expl / max(float(np.sum(np.abs(U) ** 2)), 1e-300), p_adj
+
+
+def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]:
+    """Controller consistency and start at rest; returns both checks and the samples the
+    controller's initial state needs to die out.
+
+    The difference d = u - K(y + r1, eta) is the controller's own start-up transient (when
+    the record starts mid-operation), plus K applied to any unrecorded sensor-side
+    disturbance, plus - if the firmware is not the documented controller - a part driven by
+    the excitation. Only the last counts against the documentation: the check fails when a
+    regression of d on the excitation (after the start-up) is significant and explains
+    more than 1e-6 of the power of u.
+    """
+    u = np.asarray(rec.u, dtype=float)
+    d = u - recompute_u(rec)
+    n = u.shape[0]
+    ctrl_poles = np.linalg.eigvals(np.asarray(rec.controller.A, dtype=float)) \
+        if rec.controller.A.size else np.zeros(0)
+    n_settle = settle_samples(np.concatenate([ctrl_poles, poles]), n, 1e-6)
+    tail = slice(min(n_settle, n // 2), n)
+    scale = float(np.sqrt(np.mean((u[tail] - u[tail].mean(axis=0)) ** 2))) or 1.0
+    rel_tail = float(np.sqrt(np.mean(d[tail] ** 2)) / scale)
+    x = np.concatenate(list(rec.excitation.values()), axis=1)[tail]
+    share, p_adj = _coherent_share(d[tail], x, u[tail])
+    head = slice(0, max(1, min(20, n // 50)))
+    rel_head = float(np.sqrt(np.mean(d[head] ** 2)) / scale)
+    ok = not (p_adj < 1e-3 and share > CONTROLLER_SHARE)
+    if ok:
+        line = (f"controller: the recorded u is what the documented controller makes from the "
+                f"recorded y and excitation (difference {rel_tail:.1e} of u, of which a share "
+                f"{share:.1e} follows the excitation)")
+    else:
+        line = (f"controller: FAILED - the recorded u differs from the documented controller's "
+                f"output by {100 * rel_tail:.2g} % RMS, driven by the excitation (share "
+                f"{share:.1e}, p {p_adj:.1e}); the controller that ran is not the one in the "
+                "recording's sidecar, so the model cannot be compared with the data and no "
+                "physics is named")
+    at_rest = rel_head <= max(10 * CONTROLLER_TOL, 10 * rel_tail)
+    start_line = ("start: the record starts at rest (the controller's state is zero at the "
+                  "first sample)" if at_rest else
+                  f"start: the record starts mid-operation (the controller's initial state "
+                  f"gives a start-up difference of {100 * rel_head:.2g} % in u); the first "
+                  "samples are used as pre-history only")
+    return (Check("controller", ok, line, {"relative_difference": rel_tail,
+                                           "excitation_share": share, "p_adjusted": p_adj}),
+            Check("start", True, start_line, {"at_rest": bool(at_rest),
+                                              "start_difference": rel_head}),
+            n_settle)
+
+
+def check_offsets(rec: Recording) -> tuple[Check, NDArray, NDArray, bool]:
+    """Mean and linear trend of y and u, removed where significant (|value| > 5 standard
+    errors of a batch mean). Returns the check, cleaned y and u, and whether anything was
+    removed."""
+    y = np.asarray(rec.y, dtype=float)
+    u = np.asarray(rec.u, dtype=float)
+    t = np.linspace(-1.0, 1.0, y.shape[0])[:, None]
+    found, removed = [], False
+    out = []
+    for name, v, unit, scale in (("y", y, "um", 1e6), ("u", u, "mA", 1e3)):
+        mean = v.mean(axis=0)
+        slope = np.sum((v - mean) * t, axis=0) / np.sum(t**2)
+        se = _batch_se(v)
+        se_slope = _batch_se((v - mean) * t * 3.0)          # var of the LS slope ~ 3 var/N
+        sig_m = np.abs(mean) > 5 * se
+        sig_s = np.abs(slope) > 5 * se_slope
+        if np.any(sig_m | sig_s):
+            removed = True
+            v = detrend(v, axis=0, type="linear")
+            for c in np.flatnonzero(sig_m):
+                found.append(f"{name}_{CHANNELS[c]} offset {scale * mean[c]:+.3g} {unit}")
+            for c in np.flatnonzero(sig_s & ~sig_m):
+                found.append(f"{name}_{CHANNELS[c]} drift {scale * 2 * slope[c]:+.3g} {unit}")
+        out.append(v)
+    line = ("offsets: none significant" if not found else
+            "offsets: " + ", ".join(found) + " - removed (a measurement habit, not physics)")
+    return Check("offsets", True, line, {"removed": found}), out[0], out[1], removed
+
+
+def run_checks(rec: Recording, loop_poles: NDArray) -> DataChecks:
+    """Every check of a recording. loop_poles: the discrete poles of the nominal x -> eps
+    system (S at theta = 0), whose slowest one sets the pre-history length."""
+    exc = check_excitation(rec)
+    ctrl, start_chk, _ = check_controller(rec, loop_poles)
+    off, y, u, removed = check_offsets(rec)
+    at_rest = bool(start_chk.values["at_rest"])
+    start = 0
+    if removed or not at_rest:
+        start = settle_samples(loop_poles, y.shape[0])
+    return DataChecks(checks=(exc, ctrl, start_chk, off), y=y, u=u, start=start,
+                      at_rest=at_rest)
