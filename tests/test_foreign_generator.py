@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import scipy.linalg as sla
 import scipy.signal as sps
 
 from bayes_amb.rig import load_rig
@@ -178,7 +179,6 @@ def _fine_grid_loop(plant, ctrl, eta, tau_a_sub, tau_s_sub, sub=10):
     """Reference: the same loop integrated on a grid sub times finer (plain ZOH per
     substep), the actuator current switching tau_a_sub substeps after each command and the
     sample taken tau_s_sub substeps before each sampling instant."""
-    import scipy.linalg as sla
     n, dt = plant.A.shape[0], ctrl.dt
     M = np.zeros((n + 4, n + 4))
     M[:n, :n], M[:n, n:] = plant.A * dt / sub, plant.B * dt / sub
@@ -233,3 +233,116 @@ def test_runout_is_a_1x_line_on_its_own_channel(controller_file):
     k = np.argmin(np.abs(f - 31500 / 60))
     assert abs(int(np.argmax(p[:, 2])) - k) <= 1
     assert p[k, 2] > 10 * p[k, [0, 1, 3]].max()
+
+
+# ------------------------------------------------------------ effect physics
+def _frf(A, B, C, f_hz):
+    s = 2j * np.pi * f_hz
+    return C @ np.linalg.solve(s * np.eye(A.shape[0]) - A, B)
+
+
+def _plant(effects, truth="reduced", changed=True):
+    from tests.foreign.cases import plant_of
+    spec = (CaseSpec(k_theta=K_THETA, c_nsm=C_NSM, truth=truth) if changed
+            else CaseSpec(truth=truth))
+    return plant_of(spec, load_rig(), tuple(effects))
+
+
+def _h1(bw):
+    return lambda s: 1 / (1 + s / (2 * np.pi * bw))
+
+
+def _h2(fn, z):
+    wn = 2 * np.pi * fn
+    return lambda s: wn**2 / (s * s + 2 * z * wn * s + wn**2)
+
+
+@pytest.mark.parametrize("effect, side, diag", [
+    (Effect("actuator_lag", {"bandwidth_hz": 800.0, "where": "A"}), "in",
+     lambda s: [_h1(800)(s)] * 2 + [1, 1]),
+    (Effect("actuator_2nd", {"natural_hz": 1500.0, "zeta": 0.5, "where": "all"}), "in",
+     lambda s: [_h2(1500, 0.5)(s)] * 4),
+    (Effect("sensor_lag", {"bandwidth_hz": 2000.0, "where": "B"}), "out",
+     lambda s: [1, 1] + [_h1(2000)(s)] * 2),
+    (Effect("actuator_gain", {"axis": "Ay", "gain": 0.05}), "in",
+     lambda s: [1, 1.05, 1, 1]),
+    (Effect("sensor_gain", {"channel": "By", "gain": -0.04}), "out",
+     lambda s: [1, 1, 1, 0.96]),
+])
+def test_actuator_and_sensor_effects_are_the_right_multiplicative_dynamics(effect, side, diag):
+    """G_eff = G diag(h) (actuator side) or diag(h) G (sensor side), h analytic."""
+    p0, p1 = _plant(()), _plant((effect,))
+    for f_hz in (20.0, 300.0, 1200.0):
+        s = 2j * np.pi * f_hz
+        G0, G1 = _frf(p0.A, p0.B, p0.C, f_hz), _frf(p1.A, p1.B, p1.C, f_hz)
+        D = np.diag(diag(s))
+        expect = G0 @ D if side == "in" else D @ G0
+        assert np.abs(G1 - expect).max() < 1e-9 * np.abs(G0).max()
+        assert np.abs(G1 - G0).max() > 1e-3 * np.abs(G0).max()
+
+
+def test_cross_coupling_is_the_tools_kxy_parameter():
+    """kxy at disc D1 in the reduced truth = the tool's reduced LFT at theta = kxy / k_ref."""
+    from bayes_amb.reduction import reduce_pseudo_modal
+    from bayes_amb.rotor import full_model
+    from bayes_amb.uncertainty import lft_reduced
+    rig = load_rig()
+    kxy = 4e4
+    p0 = _plant((), changed=False)
+    p1 = _plant((Effect("cross_coupling", {"where": "D1", "kxy_nm": kxy}),), changed=False)
+    red = reduce_pseudo_modal(full_model(rig))
+    up = lft_reduced(red, rig, "kxy_D1")
+    A1 = up.A + up.B_w @ np.diag(up.theta_diag([kxy / rig.k_ref])) @ up.C_z
+    for f_hz in (10.0, 150.0, 700.0):
+        G0 = _frf(p0.A, p0.B, p0.C, f_hz)
+        dmine = _frf(p1.A, p1.B, p1.C, f_hz) - G0
+        dtool = _frf(A1, up.B, up.C, f_hz) - _frf(up.A, up.B, up.C, f_hz)
+        assert np.abs(dmine - dtool).max() < 1e-6 * np.abs(dtool).max()
+
+
+def test_a_rigid_pedestal_changes_nothing_and_a_soft_one_resonates():
+    p0 = _plant(())
+    stiff = _plant((Effect("pedestal", {"bearing": "A", "mass_kg": 50.0,
+                                        "natural_hz": 1e6, "zeta": 0.03}),))
+    soft = _plant((Effect("pedestal", {"bearing": "A", "mass_kg": 50.0,
+                                       "natural_hz": 250.0, "zeta": 0.03}),))
+    for f_hz in (15.0, 250.0, 900.0):
+        G0 = _frf(p0.A, p0.B, p0.C, f_hz)
+        assert np.abs(_frf(stiff.A, stiff.B, stiff.C, f_hz) - G0).max() < 1e-6 * np.abs(G0).max()
+    # the soft housing adds a lightly damped pair near 250 Hz (shifted a little by ks)
+    lam = np.linalg.eigvals(soft.A)
+    f_n = np.abs(lam) / (2 * np.pi)
+    zeta = -lam.real / np.abs(lam)
+    near = (f_n > 200) & (f_n < 300) & (zeta > 0.01) & (zeta < 0.1)
+    assert near.sum() == 4                    # x and y, each a conjugate pair
+    # ... and changes channels A more than channels B
+    G0 = _frf(p0.A, p0.B, p0.C, 250.0)
+    d = np.abs(_frf(soft.A, soft.B, soft.C, 250.0) - G0) / np.abs(G0).max()
+    assert d[:2].max() > 5 * d[2:].max()
+
+
+def test_unbalance_force_rotates_forward_at_the_true_speed():
+    """Full truth (its force map is invertible): the oscillator states reproduce
+    u Omega^2 [cos, sin](Omega t + phi) as the force the rotor feels (rotor rows of A)."""
+    from tests.foreign.plant import node_of
+    rig = load_rig()
+    u, ph, rpm = 2e-5, 0.7, 31000.0
+    spec = CaseSpec(k_theta=K_THETA, c_nsm=C_NSM, speed_rpm_true=rpm, truth="full")
+    from tests.foreign.cases import plant_of
+    p = plant_of(spec, rig, (Effect("unbalance", {"planes": [
+        {"node": "D2", "u_kgm": u, "phase_rad": ph}]}),))
+    R = rotor(rig, rpm, "full")
+    n_r = p.n_rotor
+    osc = slice(p.A.shape[0] - 2, p.A.shape[0])
+    om = rpm * np.pi / 30
+    F = np.linalg.lstsq(R.force, p.A[:n_r, osc], rcond=None)[0]     # force per osc state
+    n = node_of(rig, "D2")
+    for t in (0.0, 1.3e-3, 7.7e-3):
+        o = np.array([np.cos(om * t), np.sin(om * t)])   # the oscillator from x0 = [1, 0]
+        E = sla.expm(p.A[osc, osc] * t) @ p.x0[osc]
+        assert np.allclose(E, o, atol=1e-12)
+        f = F @ o
+        assert np.allclose(f[[dof(n, "x"), dof(n, "y")]],
+                           u * om**2 * np.array([np.cos(om * t + ph), np.sin(om * t + ph)]),
+                           rtol=1e-9, atol=1e-12 * u * om**2)
+        assert np.abs(np.delete(f, [dof(n, "x"), dof(n, "y")])).max() < 1e-9 * u * om**2

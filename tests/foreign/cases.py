@@ -6,7 +6,9 @@ viscous damping c in [0, 300] N s/m per axis (theta c_<axis> = c / c_ref, c_ref 
 
 Concealment of an effect: rms over channels and samples of (y_with - y_without), both
 noise-free (eta only, no habits, start at rest, same bearings), divided by the sensor-noise
-rms. Drawn effects are made weaker until it is below 1 and the value is kept in the truth.
+rms. Drawn effects are scaled (physically: bandwidth, delay, gain, kxy, unbalance, runout,
+housing mass) until it lies in [0.2, 1): hidden below the noise of the raw y, yet not
+vanishingly small. The value is kept in the truth.
 """
 
 from __future__ import annotations
@@ -145,7 +147,7 @@ _WHERE = ("A", "B", "all")
 
 
 def _draw_effect(name: str, rng: np.random.Generator, noise: float) -> Effect:
-    """A first, deliberately strong draw of one effect (weakened later by _weaker)."""
+    """A first draw of one effect (scaled later by :func:`conceal`)."""
     u = rng.uniform
     if name == "actuator_lag":
         p = {"bandwidth_hz": u(300, 2000), "where": str(rng.choice(_WHERE))}
@@ -170,7 +172,7 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float) -> Effect:
         p = {"channel": str(rng.choice(AXES)), "amplitude_m": u(0.5, 3.0) * noise,
              "phase_rad": u(0, 2 * np.pi)}
     elif name == "pedestal":
-        p = {"bearing": "A", "mass_kg": u(8.0, 30.0), "natural_hz": u(150.0, 400.0),
+        p = {"bearing": "A", "mass_kg": u(40.0, 150.0), "natural_hz": u(150.0, 400.0),
              "zeta": u(0.02, 0.05)}
     else:
         raise ValueError(f"unknown effect {name!r}")
@@ -179,7 +181,8 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float) -> Effect:
 
 
 def _weaker(e: Effect, f: float = 0.7) -> Effect:
-    """The same effect made weaker by a factor f (physical direction of 'weaker')."""
+    """The same effect made weaker by a factor f (physical direction of 'weaker');
+    f > 1 makes it stronger."""
     p = dict(e.params)
     if e.name in ("actuator_lag", "sensor_lag"):
         p["bandwidth_hz"] /= f
@@ -204,7 +207,7 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
               duration_s: float = 2.0, dt: float = 1e-4, noise_rms_m: float = 5e-8,
               habits: bool = True) -> CaseSpec:
     """Draw a case of a kind (KINDS, or 'pair:<a>+<b>'): bearings off nominal, habits drawn,
-    effects drawn strong (weakened to concealment < 1 by :func:`conceal`)."""
+    effects drawn at a first guess (scaled to concealment in [0.2, 1) by :func:`conceal`)."""
     k_theta = {a: float(rng.uniform(-0.3, 0.3)) for a in AXES}
     c_nsm = {a: float(rng.uniform(0.0, 300.0)) for a in AXES}
     hab = draw_habits(rng, noise_rms_m) if habits else Habits(noise_rms_m=noise_rms_m)
@@ -235,10 +238,13 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
 
 
 def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig,
-            max_tries: int = 40) -> tuple[CaseSpec, dict[str, float]]:
-    """Weaken each effect until its concealment is < 1; returns the case and the
+            band: tuple[float, float] = (0.2, 1.0), max_tries: int = 40
+            ) -> tuple[CaseSpec, dict[str, float]]:
+    """Bring each effect's concealment into ``band`` (default [0.2, 1)): weaken it by steps
+    of 0.7 while it is >= band[1]; if its first draw is below band[0], strengthen it by
+    1/0.7 while the stronger version stays below band[1]. Returns the case and the
     concealments per effect (index:name), of all effects together ('all') and of the
-    flexible modes of a full or bending truth ('flexible')."""
+    flexible modes of a full or bending truth ('flexible', never changed)."""
     n = round(spec.duration_s / spec.dt)
     eta = spec.habits.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
     base = clean_response(replace(spec, truth="reduced", n_bending=0, effects=()), ctrl, eta,
@@ -246,12 +252,26 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
     out: dict[str, float] = {}
     effects = list(spec.effects)
     ref = replace(spec, truth="reduced", n_bending=0)
+
+    def conc(e: Effect) -> float:
+        c = concealment(ref, ctrl, eta, rig, (e,), base=base)
+        return c if np.isfinite(c) else np.inf
+
     for i, e in enumerate(effects):
+        c = conc(e)
         for _ in range(max_tries):
-            c = concealment(ref, ctrl, eta, rig, (e,), base=base)
-            if c < 1.0:
+            if c < band[1]:
                 break
             e = _weaker(e)
+            c = conc(e)
+        for _ in range(max_tries if c < band[0] else 0):
+            stronger = _weaker(e, 1 / 0.7)
+            c_s = conc(stronger)
+            if c_s >= band[1]:
+                break
+            e, c = stronger, c_s
+            if c >= band[0]:
+                break
         effects[i] = e
         out[f"{i}:{e.name}"] = c
     spec = replace(spec, effects=tuple(effects))
