@@ -1,0 +1,30 @@
+"""A foreign recording generator, written independently of bayes_amb.simulate.
+
+It plays a rotor on magnetic bearings with physics written again from the equations (see
+README.md in this folder): its own state space from the FE matrices, its own modal
+truncation, the controller read from its JSON file as a rig runs it, every effect a
+continuous-time state augmentation or an exact piecewise integration, and the habits of
+real records. It must not import bayes_amb.simulate, .discrepancy, .reduction,
+.uncertainty, .inference or .control (a test checks the imports).
+"""
+
+from tests.foreign.cases import (
+    IN_FAMILY,
+    KINDS,
+    CaseSpec,
+    Simulated,
+    conceal,
+    concealment,
+    draw_case,
+    simulate,
+    write_case,
+)
+from tests.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
+from tests.foreign.habits import Habits, draw_habits
+from tests.foreign.loop import closed_loop, read_controller, run
+from tests.foreign.plant import bearing_changes, rotor
+
+__all__ = ["EFFECT_PARAMS", "HELD_OUT", "IN_FAMILY", "KINDS", "CaseSpec", "Effect", "Habits",
+           "Simulated", "bearing_changes", "build_plant", "closed_loop", "conceal",
+           "concealment", "draw_case", "draw_habits", "read_controller", "rotor", "run",
+           "simulate", "write_case"]

@@ -1,0 +1,101 @@
+"""Real-record habits: what a rig adds to a recording that is not rotor physics.
+
+All signals are sampled at the loop's dt over the whole simulation (burn-in included), shape
+(N, 4), channels Ax, Ay, Bx, By:
+
+- sensor noise (m): AR(1) per channel, n[k] = a n[k-1] + sqrt(1 - a^2) sigma v[k], v white
+  N(0, 1), so the stationary rms is sigma and the spectrum is low-pass (coloured) for a > 0;
+- sensor DC offsets (m) and a linear drift (m/s) on y, seen by the controller;
+- an amplifier offset current (A), added to the commanded current (not to the recorded u);
+- mains lines (m) on the measurement: amplitude a_f cos(2 pi f t + phase), f = 50, 150 Hz;
+- r1 (m, on the measurement) and r2 (A, at the plant input): white, unrecorded disturbances;
+- a burn-in (s) simulated with everything running before the record starts, so that the
+  record begins mid-operation with non-zero plant and controller states;
+- the excitation eta: random binary +/-amplitude (A), independent per channel and sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.signal import lfilter
+
+
+@dataclass(frozen=True)
+class Habits:
+    """Record habits (SI). Defaults: a clean record (white 50 nm noise, 0.3 A eta, no offset,
+    no drift, no lines, no r1/r2, start at rest)."""
+
+    noise_rms_m: float = 5e-8
+    noise_ar: float = 0.0
+    sensor_offset_m: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    drift_m_per_s: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    amp_offset_a: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+    mains_m: dict[float, float] = field(default_factory=dict)
+    r1_rms_m: float = 0.0
+    r2_rms_a: float = 0.0
+    burn_in_s: float = 0.0
+    eta_amplitude_a: float = 0.3
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["mains_m"] = {str(k): v for k, v in self.mains_m.items()}
+        return d
+
+
+def draw_habits(rng: np.random.Generator, noise_rms_m: float = 5e-8) -> Habits:
+    """Realistic habits: offsets of a few um, amplifier offsets of tens of mA, drift of
+    ~1 um/s, AR(1) noise with a in [0.5, 0.9], 50/150 Hz lines of 0.3-1 x the noise rms,
+    small r1/r2, and a 0.2-0.5 s burn-in."""
+    return Habits(
+        noise_rms_m=noise_rms_m,
+        noise_ar=float(rng.uniform(0.5, 0.9)),
+        sensor_offset_m=tuple(rng.uniform(-5e-6, 5e-6, 4).tolist()),
+        drift_m_per_s=tuple(rng.uniform(-1e-6, 1e-6, 4).tolist()),
+        amp_offset_a=tuple(rng.uniform(-0.05, 0.05, 4).tolist()),
+        mains_m={50.0: float(rng.uniform(0.3, 1.0) * noise_rms_m),
+                 150.0: float(rng.uniform(0.1, 0.5) * noise_rms_m)},
+        r1_rms_m=float(rng.uniform(0.0, 0.3) * noise_rms_m),
+        r2_rms_a=float(rng.uniform(0.0, 0.01)),
+        burn_in_s=float(rng.uniform(0.2, 0.5)),
+    )
+
+
+def ar1_noise(n: int, rms: float, a: float, rng: np.random.Generator) -> NDArray:
+    """AR(1) noise (n, 4) with stationary rms ``rms`` and pole ``a`` (started stationary)."""
+    v = rng.standard_normal((n, 4)) * rms
+    if a == 0.0:
+        return v
+    out = np.empty_like(v)
+    out[0] = v[0]
+    g = np.sqrt(1.0 - a * a)
+    out[1:] = lfilter([g], [1.0, -a], v[1:], axis=0, zi=a * v[0][None, :])[0]
+    return out
+
+
+def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator
+                  ) -> tuple[dict[str, NDArray], dict[str, Any]]:
+    """Sampled habit signals over n samples from the start of the simulation.
+
+    Returns ({'eta', 'w_add', 'm', 'noise'}, drawn): eta (A), w_add = r2 + amplifier offset
+    (A), m = everything added to the measurement (m; noise included), noise alone, and the
+    random draws worth keeping in the truth (line phases).
+    """
+    t = np.arange(n) * dt
+    eta = h.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
+    noise = ar1_noise(n, h.noise_rms_m, h.noise_ar, rng)
+    m = noise + np.asarray(h.sensor_offset_m)[None, :] + np.outer(t, h.drift_m_per_s)
+    phases = {}
+    for f, a in h.mains_m.items():
+        ph = rng.uniform(0, 2 * np.pi, 4)
+        phases[str(f)] = ph.tolist()
+        m = m + a * np.cos(2 * np.pi * f * t[:, None] + ph[None, :])
+    if h.r1_rms_m:
+        m = m + h.r1_rms_m * rng.standard_normal((n, 4))
+    w_add = np.broadcast_to(np.asarray(h.amp_offset_a, dtype=float), (n, 4)).copy()
+    if h.r2_rms_a:
+        w_add += h.r2_rms_a * rng.standard_normal((n, 4))
+    return {"eta": eta, "w_add": w_add, "m": m, "noise": noise}, {"mains_phase_rad": phases}

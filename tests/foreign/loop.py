@@ -1,0 +1,188 @@
+"""The sampled loop: the controller file as a rig runs it, around the continuous plant.
+
+Controller (read from its JSON file, nothing else of the package):
+
+    xk[k+1] = Ak xk[k] + Bk [y_m[k]; eta[k]],   [u[k]; eps[k]] = Ck xk[k] + Dk [y_m[k]; eta[k]]
+
+with y_m the measured displacements (m) and eta the Youla-port excitation (A). The
+amplifiers get w[k] = u[k] + r2[k] + offset (A) and hold it for one sample (ZOH).
+
+Exact sampling with delays. With a total delay tau = tau_a + tau_s = (n + f) dt
+(actuator side tau_a, sensor side tau_s, integer n, 0 <= f < 1), let z[k] = x(t_k - tau_s)
+be the state at the instant the k-th sample is taken. Over [t_k - tau_s, t_{k+1} - tau_s)
+the applied current is w[k-n-1] for the first f dt and w[k-n] for the rest, so exactly
+
+    z[k+1] = e^{A dt} z[k] + e^{A (1-f) dt} Gam(f dt) w[k-n-1] + Gam((1-f) dt) w[k-n],
+    Gam(s) = int_0^s e^{A r} dr B,      y_m[k] = C z[k] + m[k]
+
+(m: noise, offsets, drift, lines, r1; added by the sampler). With tau = 0 this is the plain
+ZOH. Plant, controller and a delay line of w form one discrete LTI system, built once and
+run by a plain recursion.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import NDArray
+
+from tests.foreign.effects import ContinuousPlant
+
+_Y = ("y_Ax", "y_Ay", "y_Bx", "y_By")
+_ETA = ("eta_Ax", "eta_Ay", "eta_Bx", "eta_By")
+_U = ("u_Ax", "u_Ay", "u_Bx", "u_By")
+_EPS = ("eps_Ax", "eps_Ay", "eps_Bx", "eps_By")
+
+
+@dataclass(frozen=True)
+class Controller:
+    """A discrete controller from a controller file: Ak (nk, nk), By (nk, 4) on y_m,
+    Be (nk, 4) on eta, Cu/Ce (4, nk) to u/eps, D blocks (4, 4); ``raw`` the file's dict."""
+
+    dt: float
+    Ak: NDArray
+    By: NDArray
+    Be: NDArray
+    Cu: NDArray
+    Ce: NDArray
+    Duy: NDArray
+    Due: NDArray
+    Dey: NDArray
+    Dee: NDArray
+    raw: dict[str, Any]
+
+
+def read_controller(source: str | os.PathLike[str] | dict[str, Any]) -> Controller:
+    """Read a ``bayes-amb-controller/1`` JSON file (or its dict); signals ordered by name."""
+    raw = source if isinstance(source, dict) else json.loads(open(source).read())
+    if raw.get("format") != "bayes-amb-controller/1":
+        raise ValueError(f"controller: format {raw.get('format')!r} is not bayes-amb-controller/1")
+    ins, outs = list(raw["inputs"]), list(raw["outputs"])
+    iy = [ins.index(s) for s in _Y]
+    ie = [ins.index(s) for s in _ETA]
+    ou = [outs.index(s) for s in _U]
+    oe = [outs.index(s) for s in _EPS]
+    A = np.array(raw["A"], dtype=float).reshape(len(raw["A"]), -1)
+    nk = A.shape[0]
+    B = np.array(raw["B"], dtype=float).reshape(nk, len(ins))
+    C = np.array(raw["C"], dtype=float).reshape(len(outs), nk)
+    D = np.array(raw["D"], dtype=float).reshape(len(outs), len(ins))
+    return Controller(dt=float(raw["dt"]), Ak=A, By=B[:, iy], Be=B[:, ie], Cu=C[ou], Ce=C[oe],
+                      Duy=D[np.ix_(ou, iy)], Due=D[np.ix_(ou, ie)], Dey=D[np.ix_(oe, iy)],
+                      Dee=D[np.ix_(oe, ie)], raw=raw)
+
+
+def _gamma(A: NDArray, B: NDArray, s: float) -> tuple[NDArray, NDArray]:
+    """(e^{A s}, int_0^s e^{A r} dr B) from one matrix exponential."""
+    n, m = B.shape
+    M = np.zeros((n + m, n + m))
+    M[:n, :n] = A * s
+    M[:n, n:] = B * s
+    E = sla.expm(M)
+    return E[:n, :n], E[:n, n:]
+
+
+@dataclass(frozen=True)
+class ClosedLoop:
+    """X[k+1] = Acl X[k] + Bcl e[k] with e = [eta (4); w_add (4); m (4)] (A, A, m);
+    y_m = Cy X + Dy e, u = Cu X + Du e, eps = Ce X + De e.
+    X = [z (np); xk (nk); delay line w[k-1..k-n-1] (4 (n+1))]."""
+
+    Acl: NDArray
+    Bcl: NDArray
+    Cy: NDArray
+    Dy: NDArray
+    Cu: NDArray
+    Du: NDArray
+    Ce: NDArray
+    De: NDArray
+    n_plant: int
+    n_ctrl: int
+
+    def initial_state(self, plant_x0: NDArray) -> NDArray:
+        X = np.zeros(self.Acl.shape[0])
+        X[: self.n_plant] = plant_x0
+        return X
+
+
+def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
+    """Build the discrete closed loop of a plant and a controller (at the controller's dt)."""
+    dt = ctrl.dt
+    np_, nk = plant.A.shape[0], ctrl.Ak.shape[0]
+    ratio = plant.delay_s / dt
+    n_shift = int(np.floor(ratio + 1e-12))
+    f = ratio - n_shift
+    if f < 1e-12:
+        f = 0.0
+    Phi, Gnew = _gamma(plant.A, plant.B, (1.0 - f) * dt)
+    if f > 0:
+        E1, G1 = _gamma(plant.A, plant.B, f * dt)
+        Gold = Phi @ G1
+        Phi = Phi @ E1
+    else:
+        Gold = np.zeros_like(Gnew)
+    nl = 4 * (n_shift + 1)
+    nx = np_ + nk + nl
+    iz, ik, il = slice(0, np_), slice(np_, np_ + nk), slice(np_ + nk, nx)
+    C = plant.C
+    # y_m = C z + m ;  w = Cu xk + Duy y_m + Due eta + w_add
+    Cy = np.zeros((4, nx))
+    Cy[:, iz] = C
+    Dy = np.zeros((4, 12))
+    Dy[:, 8:] = np.eye(4)
+    Cw = ctrl.Duy @ Cy
+    Cw[:, ik] += ctrl.Cu
+    Dw = ctrl.Duy @ Dy
+    Dw[:, :4] += ctrl.Due
+    Dw[:, 4:8] += np.eye(4)
+    A = np.zeros((nx, nx))
+    Bm = np.zeros((nx, 12))
+    A[iz, iz] = Phi
+    line = [slice(np_ + nk + 4 * i, np_ + nk + 4 * (i + 1)) for i in range(n_shift + 1)]
+    # w[k-n] and w[k-n-1] in terms of X and e
+    for coef, lag in ((Gnew, n_shift), (Gold, n_shift + 1)):
+        if lag == 0:
+            A[iz, :] += coef @ Cw
+            Bm[iz, :] += coef @ Dw
+        else:
+            A[iz, line[lag - 1]] += coef
+    A[ik, :] += ctrl.By @ Cy
+    A[ik, ik] += ctrl.Ak
+    Bm[ik, :] += ctrl.By @ Dy
+    Bm[ik, :4] += ctrl.Be
+    A[line[0], :] = Cw
+    Bm[line[0], :] = Dw
+    for i in range(1, n_shift + 1):
+        A[line[i], line[i - 1]] = np.eye(4)
+    Cu = ctrl.Duy @ Cy
+    Cu[:, ik] += ctrl.Cu
+    Du = ctrl.Duy @ Dy
+    Du[:, :4] += ctrl.Due
+    Ce = ctrl.Dey @ Cy
+    Ce[:, ik] += ctrl.Ce
+    De = ctrl.Dey @ Dy
+    De[:, :4] += ctrl.Dee
+    del il
+    return ClosedLoop(A, Bm, Cy, Dy, Cu, Du, Ce, De, np_, nk)
+
+
+def run(cl: ClosedLoop, e: NDArray, X0: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Run the loop over inputs e (N, 12) from state X0; returns y_m, u, eps (N, 4) and the
+    final state. Outputs at step k use X[k] (the state before the update)."""
+    N = e.shape[0]
+    drive = e @ cl.Bcl.T
+    Xs = np.empty((N, X0.size))
+    X = X0.copy()
+    A = cl.Acl
+    for k in range(N):
+        Xs[k] = X
+        X = A @ X + drive[k]
+    y = Xs @ cl.Cy.T + e @ cl.Dy.T
+    u = Xs @ cl.Cu.T + e @ cl.Du.T
+    eps = Xs @ cl.Ce.T + e @ cl.De.T
+    return y, u, eps, X
