@@ -80,7 +80,8 @@ class Candidate:
 
     def equivalents(self) -> tuple[str, ...]:
         """Explanations that give the same u -> y map as this one and so cannot be told
-        apart from u, y and the excitation (METHOD.md section 8); reported as its class."""
+        apart from u, y and the excitation (a scalar h on all channels: h G = G h);
+        reported as its class."""
         return ()
 
     @property

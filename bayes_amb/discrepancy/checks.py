@@ -8,7 +8,7 @@ a failed check is reported as such (the diagnosis then names no physics, see dia
 controller   Is the recorded u what the documented controller makes from the recorded y
              and excitation? The controller file is run from rest on [y + r1; eta]; the
              difference to the recorded u must be at rounding level once the controller's
-             own initial state has died out (METHOD.md section 8: x = Vt u - Ut y equals
+             own initial state has died out (x = Vt u - Ut y equals
              eta only for the documented controller).
 start        Does the record start at rest? If the difference above is large in the first
              samples and then dies out, the controller (and so the loop) was running before
