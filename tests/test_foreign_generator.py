@@ -85,6 +85,21 @@ def test_reduced_frequency_response_agrees_with_the_tool():
         assert rel < 1e-6, f"{f_hz} Hz: relative difference {rel:.2e}"
 
 
+def test_full_frequency_response_agrees_with_the_tool():
+    from bayes_amb.rotor import full_model
+    rig = load_rig()
+    R = rotor(rig, rig.nominal_speed_rpm, "full")
+    Bi = np.column_stack([rig.ki * R.force[:, dof(rig.bearing_nodes[a[0]], a[1])]
+                          for a in AXES])
+    Cy = np.vstack([R.disp[dof(rig.sensor_nodes[a[0]], a[1])] for a in AXES])
+    fm = full_model(rig)
+    for f_hz in (5.0, 200.0, 1027.0, 3000.0):
+        s = 2j * np.pi * f_hz
+        mine = Cy @ np.linalg.solve(s * np.eye(R.n) - R.A, Bi)
+        tool = fm.C @ np.linalg.solve(s * np.eye(fm.n_states) - fm.A, fm.B)
+        assert np.abs(mine - tool).max() < 1e-9 * np.abs(tool).max()
+
+
 def test_effect_free_reduced_recording_is_reproduced_by_the_tools_forward_model(
         controller_file, tmp_path):
     """eps from the recording (tool's offline filter) = S(theta_true) eta (tool's forward

@@ -13,6 +13,7 @@ vanishingly small. The value is kept in the truth.
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -320,3 +321,29 @@ def write_case(spec: CaseSpec, out_dir: str | os.PathLike, name: str,
     return write_recording(Path(out_dir) / name, spec.dt, sim.y, sim.u, sim.eta,
                            spec.speed_rpm, ctrl.raw,
                            notes=f"foreign generator, case kind {spec.kind}", truth=truth)
+
+
+def write_suite(out_dir: str | os.PathLike, kinds: dict[str, int], seed: int,
+                controller_file: str, **draw: Any) -> list[dict[str, Any]]:
+    """Write a benchmark suite: ``kinds`` maps a kind to how many recordings. Names are
+    ``<kind>_<i>`` (':' and '+' replaced by '_'); an ``index.json`` lists every recording
+    with its kind, paths, effects and concealment. ``draw`` goes to :func:`draw_case`
+    (e.g. duration_s). Each recording has its own rng, spawned from ``seed``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ctrl = read_controller(controller_file)
+    seeds = np.random.SeedSequence(seed).spawn(sum(kinds.values()))
+    index, i = [], 0
+    for kind, count in kinds.items():
+        for j in range(count):
+            rng = np.random.default_rng(seeds[i])
+            i += 1
+            name = f"{kind.replace(':', '_').replace('+', '_')}_{j:03d}"
+            spec = draw_case(kind, rng, controller_file=str(controller_file), **draw)
+            paths = write_case(spec, out, name, rng, controller=ctrl)
+            truth = json.loads(paths["truth"].read_text())
+            index.append({"name": name, "kind": kind, "csv": paths["csv"].name,
+                          "truth": paths["truth"].name, "effects": truth["effects"],
+                          "concealment": truth["concealment"]})
+    (out / "index.json").write_text(json.dumps(index, indent=1))
+    return index

@@ -48,13 +48,13 @@ class Habits:
 
 def draw_habits(rng: np.random.Generator, noise_rms_m: float = 5e-8) -> Habits:
     """Realistic habits: offsets of a few um, amplifier offsets of tens of mA, drift of
-    ~1 um/s, AR(1) noise with a in [0.5, 0.9], 50/150 Hz lines of 0.3-1 x the noise rms,
+    up to 0.2 um/s, AR(1) noise with a in [0.5, 0.9], 50/150 Hz lines of 0.3-1 x the noise rms,
     small r1/r2, and a 0.2-0.5 s burn-in."""
     return Habits(
         noise_rms_m=noise_rms_m,
         noise_ar=float(rng.uniform(0.5, 0.9)),
         sensor_offset_m=tuple(rng.uniform(-5e-6, 5e-6, 4).tolist()),
-        drift_m_per_s=tuple(rng.uniform(-1e-6, 1e-6, 4).tolist()),
+        drift_m_per_s=tuple(rng.uniform(-2e-7, 2e-7, 4).tolist()),
         amp_offset_a=tuple(rng.uniform(-0.05, 0.05, 4).tolist()),
         mains_m={50.0: float(rng.uniform(0.3, 1.0) * noise_rms_m),
                  150.0: float(rng.uniform(0.1, 0.5) * noise_rms_m)},
