@@ -111,9 +111,12 @@ def simulate(spec: CaseSpec, controller: Controller | str | None, rng: np.random
     cl = closed_loop(plant, ctrl)
     n_rec = round(spec.duration_s / spec.dt)
     n_burn = round(spec.habits.burn_in_s / spec.dt)
-    sig, draws = habit_signals(spec.habits, n_burn + n_rec, spec.dt, rng)
+    sig, draws = habit_signals(spec.habits, n_burn + n_rec, spec.dt, rng, -n_burn * spec.dt)
     e = np.hstack([sig["eta"], sig["w_add"], sig["m"]])
-    y, u, eps, _ = run(cl, e, cl.initial_state(plant.x0))
+    # the simulation starts at t = -burn-in: the record starts at t = 0, where the line
+    # phases of the truth refer; the first state is sampled sensor_delay_s earlier still
+    x0 = plant.state_at(-n_burn * spec.dt - plant.sensor_delay_s)
+    y, u, eps, _ = run(cl, e, cl.initial_state(x0))
     keep = slice(n_burn, None)
     draws["burn_in_samples"] = n_burn
     return Simulated(y[keep], u[keep], sig["eta"][keep], eps[keep], sig["noise"][keep], draws)
@@ -125,7 +128,8 @@ def clean_response(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
     plant = plant_of(spec, rig, effects, truth)
     cl = closed_loop(plant, ctrl)
     z = np.zeros_like(eta)
-    y, _, _, _ = run(cl, np.hstack([eta, z, z]), cl.initial_state(plant.x0))
+    x0 = plant.state_at(-plant.sensor_delay_s)
+    y, _, _, _ = run(cl, np.hstack([eta, z, z]), cl.initial_state(x0))
     return y
 
 

@@ -76,15 +76,16 @@ def ar1_noise(n: int, rms: float, a: float, rng: np.random.Generator) -> NDArray
     return out
 
 
-def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator
+def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator, t0: float = 0.0
                   ) -> tuple[dict[str, NDArray], dict[str, Any]]:
-    """Sampled habit signals over n samples from the start of the simulation.
+    """Sampled habit signals over n samples, the first at time t0 (s; the record starts
+    at t = 0, so a burn-in has t0 < 0; line phases and the drift refer to t = 0).
 
     Returns ({'eta', 'w_add', 'm', 'noise'}, drawn): eta (A), w_add = r2 + amplifier offset
     (A), m = everything added to the measurement (m; noise included), noise alone, and the
     random draws worth keeping in the truth (line phases).
     """
-    t = np.arange(n) * dt
+    t = t0 + np.arange(n) * dt
     eta = h.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
     noise = ar1_noise(n, h.noise_rms_m, h.noise_ar, rng)
     m = noise + np.asarray(h.sensor_offset_m)[None, :] + np.outer(t, h.drift_m_per_s)
