@@ -7,6 +7,7 @@ Only these tests may import the tool beside the generator (to compare against it
 from __future__ import annotations
 
 import ast
+import itertools
 import json
 import subprocess
 import sys
@@ -169,13 +170,22 @@ def test_record_starts_mid_operation(controller_file):
     assert res[0.3][-1] < 1e-6            # ... and the difference decays
 
 
-def test_noise_is_coloured_with_the_given_rms_and_the_mains_lines_are_there(controller_file):
-    sig, _ = habit_signals(Habits(noise_rms_m=5e-8, noise_ar=0.8), 40000, 1e-4,
-                           np.random.default_rng(5))
+@pytest.mark.parametrize("kind", ["ar1", "pink"])
+def test_noise_is_coloured_with_the_given_rms(kind):
+    sig, _ = habit_signals(Habits(noise_rms_m=5e-8, noise_ar=0.8, noise_kind=kind), 100000,
+                           1e-4, np.random.default_rng(5))
     n = sig["noise"]
-    assert abs(n.std() / 5e-8 - 1) < 0.05
-    f, p = sps.welch(n, fs=1e4, nperseg=1024, axis=0)
+    assert abs(n.std() / 5e-8 - 1) < (0.05 if kind == "ar1" else 0.15)
+    assert abs(np.corrcoef(n.T)[0, 1]) < 0.05               # independent channels
+    f, p = sps.welch(n, fs=1e4, nperseg=4096, axis=0)
+    p = p.mean(axis=1)
     assert p[(f > 20) & (f < 300)].mean() > 5 * p[f > 3000].mean()
+    if kind == "pink":   # about 1/f: each decade 3-30-300 Hz drops by 3-30 x
+        decade = [p[(f > lo) & (f < 3 * lo)].mean() for lo in (3.0, 30.0, 300.0)]
+        assert all(3 < a / b < 30 for a, b in itertools.pairwise(decade))
+
+
+def test_the_mains_lines_are_in_the_record(controller_file):
     # in the record, the lines are exactly sinusoids at 50 and 150 Hz (the loop filters
     # them, it does not remove them): the difference to the same record without lines
     lines = {50.0: 5e-8, 150.0: 3e-8}
