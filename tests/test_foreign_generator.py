@@ -7,9 +7,11 @@ Only these tests may import the tool beside the generator (to compare against it
 from __future__ import annotations
 
 import ast
+import itertools
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -85,6 +87,21 @@ def test_reduced_frequency_response_agrees_with_the_tool():
         assert rel < 1e-6, f"{f_hz} Hz: relative difference {rel:.2e}"
 
 
+def test_full_frequency_response_agrees_with_the_tool():
+    from bayes_amb.rotor import full_model
+    rig = load_rig()
+    R = rotor(rig, rig.nominal_speed_rpm, "full")
+    Bi = np.column_stack([rig.ki * R.force[:, dof(rig.bearing_nodes[a[0]], a[1])]
+                          for a in AXES])
+    Cy = np.vstack([R.disp[dof(rig.sensor_nodes[a[0]], a[1])] for a in AXES])
+    fm = full_model(rig)
+    for f_hz in (5.0, 200.0, 1027.0, 3000.0):
+        s = 2j * np.pi * f_hz
+        mine = Cy @ np.linalg.solve(s * np.eye(R.n) - R.A, Bi)
+        tool = fm.C @ np.linalg.solve(s * np.eye(fm.n_states) - fm.A, fm.B)
+        assert np.abs(mine - tool).max() < 1e-9 * np.abs(tool).max()
+
+
 def test_effect_free_reduced_recording_is_reproduced_by_the_tools_forward_model(
         controller_file, tmp_path):
     """eps from the recording (tool's offline filter) = S(theta_true) eta (tool's forward
@@ -153,13 +170,22 @@ def test_record_starts_mid_operation(controller_file):
     assert res[0.3][-1] < 1e-6            # ... and the difference decays
 
 
-def test_noise_is_coloured_with_the_given_rms_and_the_mains_lines_are_there(controller_file):
-    sig, _ = habit_signals(Habits(noise_rms_m=5e-8, noise_ar=0.8), 40000, 1e-4,
-                           np.random.default_rng(5))
+@pytest.mark.parametrize("kind", ["ar1", "pink"])
+def test_noise_is_coloured_with_the_given_rms(kind):
+    sig, _ = habit_signals(Habits(noise_rms_m=5e-8, noise_ar=0.8, noise_kind=kind), 100000,
+                           1e-4, np.random.default_rng(5))
     n = sig["noise"]
-    assert abs(n.std() / 5e-8 - 1) < 0.05
-    f, p = sps.welch(n, fs=1e4, nperseg=1024, axis=0)
+    assert abs(n.std() / 5e-8 - 1) < (0.05 if kind == "ar1" else 0.15)
+    assert abs(np.corrcoef(n.T)[0, 1]) < 0.05               # independent channels
+    f, p = sps.welch(n, fs=1e4, nperseg=4096, axis=0)
+    p = p.mean(axis=1)
     assert p[(f > 20) & (f < 300)].mean() > 5 * p[f > 3000].mean()
+    if kind == "pink":   # about 1/f: each decade 3-30-300 Hz drops by 3-30 x
+        decade = [p[(f > lo) & (f < 3 * lo)].mean() for lo in (3.0, 30.0, 300.0)]
+        assert all(3 < a / b < 30 for a, b in itertools.pairwise(decade))
+
+
+def test_the_mains_lines_are_in_the_record(controller_file):
     # in the record, the lines are exactly sinusoids at 50 and 150 Hz (the loop filters
     # them, it does not remove them): the difference to the same record without lines
     lines = {50.0: 5e-8, 150.0: 3e-8}
@@ -177,44 +203,46 @@ def test_noise_is_coloured_with_the_given_rms_and_the_mains_lines_are_there(cont
 
 def _fine_grid_loop(plant, ctrl, eta, tau_a_sub, tau_s_sub, sub=10):
     """Reference: the same loop integrated on a grid sub times finer (plain ZOH per
-    substep), the actuator current switching tau_a_sub substeps after each command and the
-    sample taken tau_s_sub substeps before each sampling instant."""
+    substep). The fine grid starts at t = -tau_s (rotor at rest, lines at their phase
+    there); sample k is the state at k dt - tau_s; the current commanded at k dt acts from
+    k dt + tau_a on."""
     n, dt = plant.A.shape[0], ctrl.dt
+    h = dt / sub
     M = np.zeros((n + 4, n + 4))
-    M[:n, :n], M[:n, n:] = plant.A * dt / sub, plant.B * dt / sub
+    M[:n, :n], M[:n, n:] = plant.A * h, plant.B * h
     E = sla.expm(M)
     Ph, Gh = E[:n, :n], E[:n, n:]
     N = eta.shape[0]
-    x, xk = plant.x0.copy(), np.zeros(ctrl.Ak.shape[0])
-    hist = [x.copy()]                         # state on the fine grid
+    x, xk = plant.state_at(-tau_s_sub * h), np.zeros(ctrl.Ak.shape[0])
     w_hist = {}
     y = np.zeros((N, 4))
     for k in range(N):
-        j = k * sub - tau_s_sub
-        y[k] = plant.C @ hist[j] if j >= 0 else 0.0
-        u = ctrl.Cu @ xk + ctrl.Duy @ y[k] + ctrl.Due @ eta[k]
-        w_hist[k] = u
+        y[k] = plant.C @ x                     # x at fine index k sub, time k dt - tau_s
+        w_hist[k] = ctrl.Cu @ xk + ctrl.Duy @ y[k] + ctrl.Due @ eta[k]
         xk = ctrl.Ak @ xk + ctrl.By @ y[k] + ctrl.Be @ eta[k]
-        for i in range(sub):
-            idx = (k * sub + i - tau_a_sub) // sub
-            w = w_hist.get(idx, np.zeros(4))
-            x = Ph @ x + Gh @ w
-            hist.append(x.copy())
+        for i in range(k * sub, (k + 1) * sub):
+            idx = (i - tau_s_sub - tau_a_sub) // sub
+            x = Ph @ x + Gh @ w_hist.get(idx, np.zeros(4))
     return y
 
 
-def test_delays_are_exact_piecewise_integration(controller_file):
-    """Fractional delays on both sides (0.3 and 1.2 samples) against a 10x finer grid."""
+@pytest.mark.parametrize("lines", [False, True])
+def test_delays_are_exact_piecewise_integration(controller_file, lines):
+    """Fractional delays on both sides (0.3 and 1.2 samples) against a 10x finer grid,
+    also with a 1x unbalance and runout (their phase refers to t = 0 of the record)."""
     from tests.foreign.cases import clean_response, plant_of
     rig = load_rig()
     ctrl = read_controller(controller_file)
     spec = _spec(controller_file)
     eta = 0.3 * np.random.default_rng(10).choice([-1.0, 1.0], size=(600, 4))
+    extra = (Effect("unbalance", {"planes": [{"node": 20, "u_kgm": 1e-5, "phase_rad": 1.0}]}),
+             Effect("runout", {"channel": "Ay", "amplitude_m": 1e-7, "phase_rad": 2.0})
+             ) if lines else ()
     effects = (Effect("actuator_delay", {"delay_s": 0.3e-4}),
-               Effect("sensor_delay", {"delay_s": 1.2e-4}))
+               Effect("sensor_delay", {"delay_s": 1.2e-4}), *extra)
     mine = clean_response(spec, ctrl, eta, rig, effects)
-    ref = _fine_grid_loop(plant_of(spec, rig, ()), ctrl, eta, 3, 12)
-    y0 = clean_response(spec, ctrl, eta, rig, ())
+    ref = _fine_grid_loop(plant_of(spec, rig, extra), ctrl, eta, 3, 12)
+    y0 = clean_response(spec, ctrl, eta, rig, extra)
     scale = np.abs(ref).max()
     assert np.abs(mine - ref).max() < 1e-9 * scale
     assert np.abs(y0 - ref).max() > 1e-2 * scale      # the delays do matter
@@ -346,3 +374,19 @@ def test_unbalance_force_rotates_forward_at_the_true_speed():
                            u * om**2 * np.array([np.cos(om * t + ph), np.sin(om * t + ph)]),
                            rtol=1e-9, atol=1e-12 * u * om**2)
         assert np.abs(np.delete(f, [dof(n, "x"), dof(n, "y")])).max() < 1e-9 * u * om**2
+
+
+def test_line_phases_refer_to_the_start_of_the_record(controller_file):
+    """With and without a burn-in, a runout and an unbalance give the same steady 1x
+    signal in the record: their phases are those of the truth at t = 0 of the record."""
+    from tests.foreign.cases import clean_response
+    effects = (Effect("runout", {"channel": "Bx", "amplitude_m": 2e-7, "phase_rad": 0.4}),
+               Effect("unbalance", {"planes": [{"node": 5, "u_kgm": 1e-5, "phase_rad": 2.0}]}))
+    spec = replace(_spec(controller_file, burn_in_s=0.37, eta_amplitude_a=0.0),
+                   effects=effects, speed_rpm_true=31400.0)
+    rec = simulate(spec, None, np.random.default_rng(12))
+    rest = clean_response(spec, read_controller(controller_file), np.zeros_like(rec.y),
+                          load_rig(), effects)
+    tail = slice(2000, None)
+    assert np.abs(rec.y[tail] - rest[tail]).max() < 1e-6 * np.abs(rest[tail]).max()
+    assert np.abs(rest[tail]).max() > 1e-8

@@ -18,6 +18,7 @@ from tests.foreign.cases import (
     draw_case,
     simulate,
     write_case,
+    write_suite,
 )
 from tests.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
 from tests.foreign.habits import Habits, draw_habits
@@ -27,4 +28,4 @@ from tests.foreign.plant import bearing_changes, rotor
 __all__ = ["EFFECT_PARAMS", "HELD_OUT", "IN_FAMILY", "KINDS", "CaseSpec", "Effect", "Habits",
            "Simulated", "bearing_changes", "build_plant", "closed_loop", "conceal",
            "concealment", "draw_case", "draw_habits", "read_controller", "rotor", "run",
-           "simulate", "write_case"]
+           "simulate", "write_case", "write_suite"]

@@ -13,6 +13,7 @@ vanishingly small. The value is kept in the truth.
 
 from __future__ import annotations
 
+import json
 import os
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -110,9 +111,12 @@ def simulate(spec: CaseSpec, controller: Controller | str | None, rng: np.random
     cl = closed_loop(plant, ctrl)
     n_rec = round(spec.duration_s / spec.dt)
     n_burn = round(spec.habits.burn_in_s / spec.dt)
-    sig, draws = habit_signals(spec.habits, n_burn + n_rec, spec.dt, rng)
+    sig, draws = habit_signals(spec.habits, n_burn + n_rec, spec.dt, rng, -n_burn * spec.dt)
     e = np.hstack([sig["eta"], sig["w_add"], sig["m"]])
-    y, u, eps, _ = run(cl, e, cl.initial_state(plant.x0))
+    # the simulation starts at t = -burn-in: the record starts at t = 0, where the line
+    # phases of the truth refer; the first state is sampled sensor_delay_s earlier still
+    x0 = plant.state_at(-n_burn * spec.dt - plant.sensor_delay_s)
+    y, u, eps, _ = run(cl, e, cl.initial_state(x0))
     keep = slice(n_burn, None)
     draws["burn_in_samples"] = n_burn
     return Simulated(y[keep], u[keep], sig["eta"][keep], eps[keep], sig["noise"][keep], draws)
@@ -124,7 +128,8 @@ def clean_response(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
     plant = plant_of(spec, rig, effects, truth)
     cl = closed_loop(plant, ctrl)
     z = np.zeros_like(eta)
-    y, _, _, _ = run(cl, np.hstack([eta, z, z]), cl.initial_state(plant.x0))
+    x0 = plant.state_at(-plant.sensor_delay_s)
+    y, _, _, _ = run(cl, np.hstack([eta, z, z]), cl.initial_state(x0))
     return y
 
 
@@ -320,3 +325,29 @@ def write_case(spec: CaseSpec, out_dir: str | os.PathLike, name: str,
     return write_recording(Path(out_dir) / name, spec.dt, sim.y, sim.u, sim.eta,
                            spec.speed_rpm, ctrl.raw,
                            notes=f"foreign generator, case kind {spec.kind}", truth=truth)
+
+
+def write_suite(out_dir: str | os.PathLike, kinds: dict[str, int], seed: int,
+                controller_file: str, **draw: Any) -> list[dict[str, Any]]:
+    """Write a benchmark suite: ``kinds`` maps a kind to how many recordings. Names are
+    ``<kind>_<i>`` (':' and '+' replaced by '_'); an ``index.json`` lists every recording
+    with its kind, paths, effects and concealment. ``draw`` goes to :func:`draw_case`
+    (e.g. duration_s). Each recording has its own rng, spawned from ``seed``."""
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    ctrl = read_controller(controller_file)
+    seeds = np.random.SeedSequence(seed).spawn(sum(kinds.values()))
+    index, i = [], 0
+    for kind, count in kinds.items():
+        for j in range(count):
+            rng = np.random.default_rng(seeds[i])
+            i += 1
+            name = f"{kind.replace(':', '_').replace('+', '_')}_{j:03d}"
+            spec = draw_case(kind, rng, controller_file=str(controller_file), **draw)
+            paths = write_case(spec, out, name, rng, controller=ctrl)
+            truth = json.loads(paths["truth"].read_text())
+            index.append({"name": name, "kind": kind, "csv": paths["csv"].name,
+                          "truth": paths["truth"].name, "effects": truth["effects"],
+                          "concealment": truth["concealment"]})
+    (out / "index.json").write_text(json.dumps(index, indent=1))
+    return index

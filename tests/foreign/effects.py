@@ -97,8 +97,10 @@ def _channels(where: str) -> list[int]:
 @dataclass(frozen=True)
 class ContinuousPlant:
     """x' = A x + B w, y_s = C x. A (n, n) 1/s, B (n, 4) per A, C (4, n) in m;
-    ``x0`` (n,) the state at the start of the simulation (oscillator phase);
-    ``delay_s`` the actuator-side plus sensor-side delay (s); ``n_rotor`` rotor states."""
+    ``x0`` (n,) the state at time 0 (rotor at rest, oscillator at angle 0);
+    ``delay_s`` the actuator-side plus sensor-side delay (s), ``sensor_delay_s`` the latter
+    alone; ``n_rotor`` rotor states; ``omega`` the true spin (rad/s) and ``osc`` the index of
+    the oscillator's first state (-1 if none)."""
 
     A: NDArray
     B: NDArray
@@ -106,6 +108,17 @@ class ContinuousPlant:
     x0: NDArray
     delay_s: float
     n_rotor: int
+    sensor_delay_s: float = 0.0
+    omega: float = 0.0
+    osc: int = -1
+
+    def state_at(self, t: float) -> NDArray:
+        """x0 with the oscillator turned to time t (s; the rotor at rest): the state a
+        simulation starts from at time t, so that line phases refer to time 0."""
+        x = self.x0.copy()
+        if self.osc >= 0:
+            x[self.osc:self.osc + 2] = [np.cos(self.omega * t), np.sin(self.omega * t)]
+        return x
 
 
 class _Builder:
@@ -254,7 +267,10 @@ def build_plant(R: RotorBlock, rig: Rig, effects: tuple[Effect, ...] | list[Effe
             row = np.zeros(n)
             row[s] = 1.0
         C[ch] = gain_s[ch] * row
-    delay = sum(e.params["delay_s"] for e in eff.get("actuator_delay", [])
-                + eff.get("sensor_delay", []))
-    return ContinuousPlant(A=A, B=B, C=C, x0=x0, delay_s=float(delay), n_rotor=R.n)
+    d_s = sum(e.params["delay_s"] for e in eff.get("sensor_delay", []))
+    d_a = sum(e.params["delay_s"] for e in eff.get("actuator_delay", []))
+    return ContinuousPlant(A=A, B=B, C=C, x0=x0, delay_s=float(d_a + d_s), n_rotor=R.n,
+                           sensor_delay_s=float(d_s),
+                           omega=float(speed_rpm_true) * np.pi / 30.0,
+                           osc=S["osc"].start if lines else -1)
 

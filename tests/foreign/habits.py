@@ -3,8 +3,10 @@
 All signals are sampled at the loop's dt over the whole simulation (burn-in included), shape
 (N, 4), channels Ax, Ay, Bx, By:
 
-- sensor noise (m): AR(1) per channel, n[k] = a n[k-1] + sqrt(1 - a^2) sigma v[k], v white
-  N(0, 1), so the stationary rms is sigma and the spectrum is low-pass (coloured) for a > 0;
+- sensor noise (m), independent per channel, stationary rms sigma: ``noise_kind="ar1"``:
+  n[k] = a n[k-1] + sqrt(1 - a^2) sigma v[k], v white N(0, 1), low-pass for a > 0;
+  ``"pink"``: a sum of four AR(1) sections with poles 0.5, 0.9, 0.99, 0.999 and equal
+  variances (about 1/f between a few Hz and a few kHz at 10 kHz), scaled to rms sigma;
 - sensor DC offsets (m) and a linear drift (m/s) on y, seen by the controller;
 - an amplifier offset current (A), added to the commanded current (not to the recorded u);
 - mains lines (m) on the measurement: amplitude a_f cos(2 pi f t + phase), f = 50, 150 Hz;
@@ -31,6 +33,7 @@ class Habits:
 
     noise_rms_m: float = 5e-8
     noise_ar: float = 0.0
+    noise_kind: str = "ar1"
     sensor_offset_m: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     drift_m_per_s: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
     amp_offset_a: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
@@ -48,13 +51,15 @@ class Habits:
 
 def draw_habits(rng: np.random.Generator, noise_rms_m: float = 5e-8) -> Habits:
     """Realistic habits: offsets of a few um, amplifier offsets of tens of mA, drift of
-    ~1 um/s, AR(1) noise with a in [0.5, 0.9], 50/150 Hz lines of 0.3-1 x the noise rms,
+    up to 0.2 um/s, AR(1) noise with a in [0.5, 0.9] (or pink noise, one case in three),
+    50/150 Hz lines of 0.3-1 x the noise rms,
     small r1/r2, and a 0.2-0.5 s burn-in."""
     return Habits(
         noise_rms_m=noise_rms_m,
         noise_ar=float(rng.uniform(0.5, 0.9)),
+        noise_kind="pink" if rng.uniform() < 1 / 3 else "ar1",
         sensor_offset_m=tuple(rng.uniform(-5e-6, 5e-6, 4).tolist()),
-        drift_m_per_s=tuple(rng.uniform(-1e-6, 1e-6, 4).tolist()),
+        drift_m_per_s=tuple(rng.uniform(-2e-7, 2e-7, 4).tolist()),
         amp_offset_a=tuple(rng.uniform(-0.05, 0.05, 4).tolist()),
         mains_m={50.0: float(rng.uniform(0.3, 1.0) * noise_rms_m),
                  150.0: float(rng.uniform(0.1, 0.5) * noise_rms_m)},
@@ -76,17 +81,32 @@ def ar1_noise(n: int, rms: float, a: float, rng: np.random.Generator) -> NDArray
     return out
 
 
-def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator
+PINK_POLES = (0.5, 0.9, 0.99, 0.999)
+
+
+def pink_noise(n: int, rms: float, rng: np.random.Generator) -> NDArray:
+    """Pink-ish noise (n, 4): equal-variance AR(1) sections at PINK_POLES, rms ``rms``."""
+    parts = [ar1_noise(n, 1.0, a, rng) for a in PINK_POLES]
+    return rms * np.sum(parts, axis=0) / np.sqrt(len(PINK_POLES))
+
+
+def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator, t0: float = 0.0
                   ) -> tuple[dict[str, NDArray], dict[str, Any]]:
-    """Sampled habit signals over n samples from the start of the simulation.
+    """Sampled habit signals over n samples, the first at time t0 (s; the record starts
+    at t = 0, so a burn-in has t0 < 0; line phases and the drift refer to t = 0).
 
     Returns ({'eta', 'w_add', 'm', 'noise'}, drawn): eta (A), w_add = r2 + amplifier offset
     (A), m = everything added to the measurement (m; noise included), noise alone, and the
     random draws worth keeping in the truth (line phases).
     """
-    t = np.arange(n) * dt
+    t = t0 + np.arange(n) * dt
     eta = h.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
-    noise = ar1_noise(n, h.noise_rms_m, h.noise_ar, rng)
+    if h.noise_kind == "pink":
+        noise = pink_noise(n, h.noise_rms_m, rng)
+    elif h.noise_kind == "ar1":
+        noise = ar1_noise(n, h.noise_rms_m, h.noise_ar, rng)
+    else:
+        raise ValueError(f"noise_kind must be 'ar1' or 'pink', got {h.noise_kind!r}")
     m = noise + np.asarray(h.sensor_offset_m)[None, :] + np.outer(t, h.drift_m_per_s)
     phases = {}
     for f, a in h.mains_m.items():

@@ -128,7 +128,7 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
         Gold = np.zeros_like(Gnew)
     nl = 4 * (n_shift + 1)
     nx = np_ + nk + nl
-    iz, ik, il = slice(0, np_), slice(np_, np_ + nk), slice(np_ + nk, nx)
+    iz, ik = slice(0, np_), slice(np_, np_ + nk)
     C = plant.C
     # y_m = C z + m ;  w = Cu xk + Duy y_m + Due eta + w_add
     Cy = np.zeros((4, nx))
@@ -167,7 +167,6 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     Ce[:, ik] += ctrl.Ce
     De = ctrl.Dey @ Dy
     De[:, :4] += ctrl.Dee
-    del il
     return ClosedLoop(A, Bm, Cy, Dy, Cu, Du, Ce, De, np_, nk)
 
 
