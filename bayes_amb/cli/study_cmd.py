@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import argparse
+import shlex
+import sys
 
 from bayes_amb.cli.common import emit
-from bayes_amb.errors import BayesAmbError
+from bayes_amb.errors import BayesAmbError, StudyInterrupted
 from bayes_amb.studies import finalise, load_study, run_study
 
 
@@ -34,8 +36,15 @@ def run(args: argparse.Namespace) -> int:
     spec = load_study(args.study)
     if args.workers is not None and args.workers < 1:
         raise BayesAmbError(f"option --workers: value {args.workers} must be >= 1")
-    rows = run_study(spec, args.out, workers=args.workers, dask_local=args.dask_local,
-                     scheduler=args.scheduler, progress=not (args.no_progress or args.json))
+    try:
+        rows = run_study(spec, args.out, workers=args.workers, dask_local=args.dask_local,
+                         scheduler=args.scheduler,
+                         progress=not (args.no_progress or args.json))
+    except StudyInterrupted as exc:
+        sys.stderr.write(f"bayes-amb study: {exc}; resume with: bayes-amb study "
+                         f"{shlex.quote(args.study)} --out {shlex.quote(args.out)} "
+                         "--resume\n")
+        return exc.exit_status
     manifest = finalise(spec, rows, args.out)
     if not args.no_figures:
         from bayes_amb.plots.studies import study_figures
