@@ -47,7 +47,7 @@ from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
 from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.io.atomic import json_text, write_netcdf_atomic, write_text_atomic
-from bayes_amb.io.recording import Recording
+from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
 from bayes_amb.uncertainty import parse_param_list
 
@@ -181,6 +181,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] = "
     """Locate, explain and model the discrepancy between a recording and the nominal model."""
     opt = options or DiagnoseOptions()
     t0 = time.perf_counter()
+    require_excitation(recording)
     names = parse_param_list(params)
     say = opt.progress or (lambda _: None)
     fwd = ForwardModel(recording, names)
