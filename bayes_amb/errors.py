@@ -31,3 +31,26 @@ class RecordingError(BayesAmbError):
 
 class LFTError(BayesAmbError):
     """An LFT is ill-posed or its blocks have inconsistent dimensions."""
+
+
+class StudyInterrupted(KeyboardInterrupt):
+    """A study was stopped by SIGINT or SIGTERM; the finished replicates are saved.
+
+    A KeyboardInterrupt (not a user error): ``except Exception`` in numerical code must not
+    swallow it. ``signum`` is the signal, ``done`` and ``total`` count the replicates in
+    ``results`` (the results file), so the caller can say how to resume.
+    """
+
+    def __init__(self, signum: int, done: int = 0, total: int = 0,
+                 results: str = "") -> None:
+        import signal
+
+        self.signum, self.done, self.total, self.results = signum, done, total, results
+        name = signal.Signals(signum).name
+        super().__init__(f"interrupted by {name}: {done} of {total} replicates are saved in "
+                         f"{results}" if results else f"interrupted by {name}")
+
+    @property
+    def exit_status(self) -> int:
+        """128 + the signal number (130 for SIGINT, 143 for SIGTERM), as a shell reports."""
+        return 128 + self.signum

@@ -90,9 +90,10 @@ MALFORMED = "[shaft\nlength = 0.45\n"
     (["params", "--rig", "{tmp}/missing.toml"], ["missing.toml", "not found"]),
     (["model", "--colour", "red"], ["unrecognized arguments: --colour"]),
     (["model", "--speed-rpm", "-5"], ["--speed-rpm", "-5"]),
-    (["model", "--speed-rpm", "1e9"], ["--speed-rpm", "out of range"]),
-    (["model", "--speed-rpm", "nan"], ["--speed-rpm", "out of range"]),
-    (["model", "--speed-rpm", "fast"], ["--speed-rpm", "invalid float value"]),
+    (["model", "--speed-rpm", "1e9"], ["--speed-rpm", "out of range: must be in 0..63000 rpm"]),
+    (["model", "--speed-rpm", "-1e3"], ["--speed-rpm", "value -1000 out of range"]),
+    (["model", "--speed-rpm", "nan"], ["--speed-rpm", "'nan' is not a finite number"]),
+    (["model", "--speed-rpm", "fast"], ["--speed-rpm", "'fast' is not a number"]),
     (["frobnicate"], ["invalid choice", "frobnicate"]),
 ])
 def test_user_errors_give_one_line_and_status_2(tmp_path: Path, capsys, argv, must_contain):

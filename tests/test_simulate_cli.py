@@ -124,17 +124,26 @@ def controller_1e4(tmp_path_factory):
 BAD = [
     (["--set", "k_Bz=0.5"], "unknown parameter name 'k_Bz'"),
     (["--set", "k_By=abc"], "option --set: k_By: value 'abc' is not a number"),
-    (["--set", "k_By=2"], r"option --set: k_By=2.0 out of range \[-0.95, 0.95\]"),
+    (["--set", "k_By=2"], r"option --set: k_By: value 2 out of range: must be in -0\.95\.\.0\.95$"),
     (["--effect", "wobble"], "unknown effect 'wobble'"),
     (["--effect", "actuator_lag:bw=3"], "effect actuator_lag: unknown parameter 'bw'"),
     (["--effect", "time_delay:delay_s=1"], "delay_s: value 1 out of range"),
     (["--controller", "{missing}"], "controller file .*nope.json.*not found"),
     (["--controller", "{ctl}"], "field dt: 0.0001 s does not match the simulation dt 0.001 s"),
-    (["--noise-rms=-1e-7"], "option --noise-rms: expected a non-negative number"),
-    (["--duration", "0"], "option --duration: expected 0 < s <= 600, got 0.0"),
+    (["--noise-rms=-1e-7"], "argument --noise-rms: value -1e-07 out of range: must be >= 0 m$"),
+    (["--noise-rms", "-1e-7"], "argument --noise-rms: value -1e-07 out of range: must be >= 0 m$"),
+    (["--dt", "-1e-3"], "argument --dt: value -0.001 out of range: must be > 0 and <= 0.01 s$"),
+    (["--duration", "0"], "argument --duration: value 0 out of range: must be > 0 and <= 600 s$"),
+    (["--duration", "1e-3"], "option --duration: 0.001 s is shorter than 2 samples of --dt"),
+    (["--amplitude", "0"], "argument --amplitude: value 0 out of range: must be > 0 A$"),
+    (["--amplitude", "nan"], "argument --amplitude: value 'nan' is not a finite number$"),
+    (["--seed", "-1"], "argument --seed: value -1 out of range: must be in 0..4294967295$"),
+    (["--speed-rpm", "1e5"], "option --speed-rpm: value 100000 out of range: must be in "
+     "0..63000 rpm$"),
+    (["-o", "{missing_dir}/x.csv"], "error: {missing_dir}/x.csv: No such file or directory$"),
     (["--band", "10,20"], "option --band: only the multisine excitation has a band"),
     (["--excitation", "multisine", "--band", "20,10"],
-     r"option --band: expected 0 < lo < hi <= Nyquist 500 Hz, got \[20.0, 10.0\]"),
+     r"option --band: value 20,10 out of range: must be 0 < LO < HI <= 500 Hz \(Nyquist\)$"),
     (["--excitation", "multisine", "--band", "10"], "option --band: expected LO,HI in Hz"),
 ]
 
@@ -143,14 +152,18 @@ BAD = [
 def test_bad_input_one_line_exit_2(extra, match, tmp_path, capsys, controller_1e4):
     import re
 
-    extra = [e.format(missing=tmp_path / "nope.json", ctl=controller_1e4) for e in extra]
+    missing_dir = tmp_path / "no_such_dir"
+    extra = [e.format(missing=tmp_path / "nope.json", ctl=controller_1e4,
+                      missing_dir=missing_dir) for e in extra]
+    match = match.format(missing_dir=re.escape(str(missing_dir)))
     out_csv = tmp_path / "x.csv"
     code, out, err = run_cli(["simulate", "--truth", "reduced", "--dt", "1e-3",
                               "--duration", "0.05", "-o", str(out_csv), *extra], capsys)
     assert code == 2 and out == ""
     assert err.endswith("\n") and err.count("\n") == 1
     assert err.startswith("bayes-amb simulate: error: ")
-    assert re.search(match, err), err
+    assert re.search(match, err.rstrip("\n")), err
+    assert ".tmp" not in err                    # the user's path, not the atomic temp file
     assert not out_csv.exists() and not out_csv.with_suffix(".json").exists()
 
 

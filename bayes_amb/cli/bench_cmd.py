@@ -20,10 +20,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "'--only study' (1000-replicate study throughput) about 5. Set "
                        "OPENBLAS_NUM_THREADS=1 for comparable figures.")
     p.add_argument("--only", default=None, metavar="NAME,...",
-                   help="comma-separated benchmarks to run (default: all but study)")
+                   help="comma-separated benchmarks to run, of " + ", ".join(BENCHMARKS)
+                   + " (default: all but study)")
     p.add_argument("--quick", action="store_true",
-                   help="smoke-test sizes (seconds; the figures are not representative)")
-    p.add_argument("--json", action="store_true", help="print JSON")
+                   help="smoke-test sizes (seconds; the figures are not representative; "
+                   "default: full sizes)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 

@@ -39,8 +39,12 @@ def emit(data: dict[str, Any], text: str, as_json: bool) -> None:
 def add_prior_options(p: Any) -> None:
     """--prior NAME=kind(a,b) (repeatable) and --prior-file FILE."""
     p.add_argument("--prior", action="append", default=[], metavar="NAME=kind(a,b)",
-                   help="prior, e.g. k_By=uniform(-0.9,0.9) (repeatable)")
-    p.add_argument("--prior-file", default=None, help="TOML file with a [priors] table")
+                   help="prior of one parameter: uniform(lo,hi), normal(mu,sd), "
+                   "normal(mu,sd,lo,hi) (truncated) or lognormal(mu,sigma), e.g. "
+                   "k_By=normal(0.3,0.2) (repeatable; wins over --prior-file; default: "
+                   "uniform over the stability-safe range, k_*/c_* -0.8..0.8, kxy_* -1..1)")
+    p.add_argument("--prior-file", default=None, metavar="FILE",
+                   help="TOML file with a [priors] table (default none)")
 
 
 def read_priors(args: Any) -> dict[str, Any]:

@@ -7,13 +7,14 @@ import argparse
 import numpy as np
 
 from bayes_amb.cli.common import emit
+from bayes_amb.cli.options import real
 from bayes_amb.control.coprime import bezout_residual, coprime_factors
 from bayes_amb.control.discrete import spectral_radius, zoh
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.robustness import full_plant_discrete, loop_spectral_radius, sensitivity
 from bayes_amb.control.youla import s_theta_exact
 from bayes_amb.reduction import reduce_pseudo_modal
-from bayes_amb.rig import load_rig
+from bayes_amb.rig import check_speed_rpm, load_rig
 from bayes_amb.rotor import full_model
 from bayes_amb.uncertainty import lft_reduced
 
@@ -26,11 +27,16 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Design the observer-based controller (discrete LQR + "
                        "Kalman on the 8-state reduced model), check it on the full plant and "
                        "export it as bayes-amb-controller/1 JSON.")
-    p.add_argument("--rig", default=None, help="rig TOML file (default: the reference rig)")
-    p.add_argument("--dt", type=float, default=1e-4, help="sample time in s (default 1e-4)")
-    p.add_argument("--speed-rpm", type=float, default=None, help="design speed (default nominal)")
-    p.add_argument("--export", metavar="FILE", default=None, help="write the controller JSON")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig TOML file (default: the reference rig)")
+    p.add_argument("--dt", type=real(0, 0.01, lo_open=True, unit="s"), default=1e-4,
+                   metavar="S", help="sample time, s, > 0 and <= 0.01 (default 1e-4)")
+    p.add_argument("--speed-rpm", type=real(), default=None, metavar="RPM",
+                   help="design speed, rpm, 0..2 x the rig's nominal speed (default: nominal, "
+                   "31500 on the reference rig)")
+    p.add_argument("--export", metavar="FILE", default=None,
+                   help="write the controller JSON to FILE (default: do not export)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 
@@ -38,7 +44,7 @@ def controller_report(rig_path: str | None = None, dt: float = 1e-4,
                       speed_rpm: float | None = None, export: str | None = None) -> dict:
     """Design, verify and optionally export the reference controller (Python API)."""
     rig = load_rig(rig_path)
-    ctrl = reference_controller(rig, dt, speed_rpm)
+    ctrl = reference_controller(rig, dt, check_speed_rpm(rig, speed_rpm))
     fm = full_model(rig, ctrl.speed_rpm)
     K = ctrl.controller_matrices()
     Ap, Bp = full_plant_discrete(fm.A, fm.B, dt)

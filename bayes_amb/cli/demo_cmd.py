@@ -8,6 +8,7 @@ import sys
 import time
 
 from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.cli.options import seed
 from bayes_amb.demo import PAPER_THETA, DemoConfig, run_demo
 
 
@@ -20,10 +21,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "OUT/report.pdf. About 2-4 minutes on two cores.")
     p.add_argument("--out", default="reports/demo", metavar="DIR",
                    help="output folder (default reports/demo)")
-    p.add_argument("--seed", type=int, default=0, help="seed of simulations and samplers")
-    p.add_argument("--quick", action="store_true",
-                   help="a smoke test: short records and few sampler steps (seconds)")
-    p.add_argument("--json", action="store_true", help="print the results as JSON")
+    p.add_argument("--seed", type=seed, default=0, help="seed of simulations and samplers, "
+                   "0..4294967295 (default 0)")
+    p.add_argument("--quick", action="store_true", help="a smoke test: short records and few "
+                   "sampler steps (seconds; default: the full demo)")
+    p.add_argument("--json", action="store_true",
+                   help="print the results as JSON (default: text)")
     p.set_defaults(func=run)
 
 

@@ -6,6 +6,7 @@ import argparse
 import sys
 
 from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
+from bayes_amb.cli.options import integer, real, seed
 from bayes_amb.discrepancy import VOCABULARY, DiagnoseOptions, all_candidates, diagnose
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import load_recording
@@ -18,24 +19,31 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "candidate physics (" + ", ".join(VOCABULARY) + "), accept effects "
                        "greedily by Bayes factor and compare the fit before and after. "
                        "Writes DIR/diagnosis.json, DIR/residuals.nc and DIR/models/*.nc.")
-    p.add_argument("recording", metavar="NAME.csv")
-    p.add_argument("--params", default=None,
-                   help="stiffness/damping parameters kept in every model (default: all eight "
-                        "bearing coefficients k_Ax,k_Ay,k_Bx,k_By,c_Ax,c_Ay,c_Bx,c_By; any "
-                        "left out is tried as an explanation before any physics)")
+    p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
+    p.add_argument("--params", default=None, metavar="NAMES",
+                   help="stiffness/damping parameters kept in every model, comma-separated "
+                        "(default: all eight bearing coefficients k_Ax,k_Ay,k_Bx,k_By,c_Ax,"
+                        "c_Ay,c_Bx,c_By; any left out is tried as an explanation before any "
+                        "physics)")
     add_prior_options(p)
-    p.add_argument("--effects", default=",".join(VOCABULARY),
-                   help="effects to try (comma-separated; default all)")
-    p.add_argument("--threshold", type=float, default=3.0,
-                   help="log Bayes factor above which an effect is accepted (default 3)")
-    p.add_argument("--max-effects", type=int, default=3)
+    p.add_argument("--effects", default=",".join(VOCABULARY), metavar="NAMES",
+                   help="effects to try, comma-separated, of " + ", ".join(VOCABULARY)
+                   + " (default: all)")
+    p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
+                   help="log Bayes factor above which an effect is accepted, >= 0 (default 3)")
+    p.add_argument("--max-effects", type=integer(0), default=3, metavar="N",
+                   help="most effects to accept, >= 0 (default 3)")
     p.add_argument("--sample", action="store_true",
-                   help="emcee posteriors of the nominal and final models (default Laplace)")
-    p.add_argument("--steps", type=int, default=2000, help="emcee steps with --sample")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, metavar="DIR")
-    p.add_argument("--no-progress", action="store_true", help="no progress messages")
-    p.add_argument("--json", action="store_true", help="print diagnosis.json to stdout")
+                   help="emcee posteriors of the nominal and final models (default: Laplace)")
+    p.add_argument("--steps", type=integer(10), default=2000, metavar="N",
+                   help="emcee steps with --sample, >= 10 (default 2000)")
+    p.add_argument("--seed", type=seed, default=0, help="seed, 0..4294967295 (default 0)")
+    p.add_argument("--out", required=True, metavar="DIR",
+                   help="folder for diagnosis.json, residuals.nc and models/ (required)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress messages (default: progress on stderr)")
+    p.add_argument("--json", action="store_true",
+                   help="print diagnosis.json to stdout (default: text)")
     p.set_defaults(func=run)
 
 
@@ -80,17 +88,13 @@ def format_report(r: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = load_recording(args.recording)
     priors = read_priors(args)
     wanted = [e.strip() for e in args.effects.split(",") if e.strip()]
     unknown = [e for e in wanted if e not in VOCABULARY]
     if unknown or not wanted:
         raise BayesAmbError(f"option --effects: unknown effect {unknown[0] if unknown else ''!r};"
                             f" known: {', '.join(VOCABULARY)}")
-    if args.max_effects < 0:
-        raise BayesAmbError(f"option --max-effects: expected >= 0, got {args.max_effects}")
-    if args.steps < 10:
-        raise BayesAmbError(f"option --steps: value {args.steps} too small (>= 10)")
+    rec = load_recording(args.recording)
     cands = tuple(c for c in all_candidates() if c.effect in wanted)
     quiet = args.no_progress or args.json
 

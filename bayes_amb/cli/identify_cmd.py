@@ -6,7 +6,7 @@ import argparse
 import sys
 
 from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
-from bayes_amb.errors import BayesAmbError
+from bayes_amb.cli.options import integer, seed
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.io.recording import load_recording
 
@@ -16,19 +16,33 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Fit S(theta) to a closed-loop recording: MAP, then an "
                        "emcee posterior run to 50 autocorrelation times. Writes "
                        "RUN_DIR/posterior.nc and RUN_DIR/summary.json.")
-    p.add_argument("recording", metavar="NAME.csv")
-    p.add_argument("--params", required=True, help="comma-separated names, e.g. k_By,c_By")
+    p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
+    p.add_argument("--params", required=True, metavar="NAMES",
+                   help="comma-separated parameter names, e.g. k_By,c_By (required; names: "
+                   "bayes-amb params)")
     add_prior_options(p)
-    p.add_argument("--walkers", type=int, default=None)
+    p.add_argument("--walkers", type=integer(4), default=None, metavar="N",
+                   help="emcee walkers, >= 4 and >= 2 x the sampled dimensions (default: "
+                   "max(24, 2 x dimensions + 2))")
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--steps", type=int, default=None, help="fixed number of steps")
-    g.add_argument("--auto", action="store_true", help="run to 50 tau (the default)")
-    p.add_argument("--map-only", action="store_true", help="MAP + Laplace only (fast)")
-    p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("--out", required=True, metavar="RUN_DIR")
-    p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    p.add_argument("--json", action="store_true", help="print summary.json to stdout")
+    g.add_argument("--steps", type=integer(10), default=None, metavar="N",
+                   help="fixed number of emcee steps, >= 10 (default: run to 50 "
+                   "autocorrelation times, at most 20000 steps)")
+    g.add_argument("--auto", action="store_true",
+                   help="run to 50 autocorrelation times (default: on)")
+    p.add_argument("--map-only", action="store_true",
+                   help="MAP + Laplace only, fast (default: MAP, then emcee)")
+    p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs",
+                   help="MAP optimiser, one of lbfgs (L-BFGS-B, multi-start), nelder-mead "
+                   "(the paper's fminsearch) (default lbfgs)")
+    p.add_argument("--seed", type=seed, default=0,
+                   help="sampler seed, 0..4294967295 (default 0)")
+    p.add_argument("--out", required=True, metavar="RUN_DIR",
+                   help="folder for posterior.nc and summary.json (required)")
+    p.add_argument("--no-progress", action="store_true",
+                   help="no progress bar (default: a bar on stderr)")
+    p.add_argument("--json", action="store_true",
+                   help="print summary.json to stdout (default: a table)")
     p.set_defaults(func=run)
 
 
@@ -70,12 +84,8 @@ def format_summary(s: dict) -> str:
 
 
 def run(args: argparse.Namespace) -> int:
-    rec = load_recording(args.recording)
     priors = read_priors(args)
-    if args.walkers is not None and args.walkers < 4:
-        raise BayesAmbError(f"option --walkers: value {args.walkers} too small")
-    if args.steps is not None and args.steps < 10:
-        raise BayesAmbError(f"option --steps: value {args.steps} too small (>= 10)")
+    rec = load_recording(args.recording)
     update, bar = _progress_bar(not (args.no_progress or args.json or args.map_only))
     try:
         result = identify(rec, args.params, priors, IdentifyOptions(

@@ -8,14 +8,25 @@ from __future__ import annotations
 
 import argparse
 import logging
+import re
 import sys
 
 from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
 
+_NEGATIVE_NUMBER = re.compile(r"^-(\d[\d_]*\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
+                              re.IGNORECASE)
+
 
 class _OneLineParser(argparse.ArgumentParser):
-    """ArgumentParser whose errors are a single line and exit status 2."""
+    """ArgumentParser whose errors are a single line and exit status 2, and which reads
+    negative numbers in any notation (``--dt -1e-3``, ``--noise-rms -.5``, ``-inf``) as
+    values: argparse's own pattern knows only ``-1`` and ``-1.5``, so ``-1e-3`` looked like
+    an unknown option and gave "expected one argument"."""
+
+    def __init__(self, *args, **kwargs) -> None:  # type: ignore[no-untyped-def]
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message: str) -> None:  # type: ignore[override]
         sys.stderr.write(f"{self.prog}: error: {message}\n")
@@ -53,7 +64,10 @@ def _add_optional_commands(sub: argparse._SubParsersAction) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:                 # a usage error (status 2), --help or --version
+        return exc.code if isinstance(exc.code, int) else 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     if not getattr(args, "func", None):
@@ -68,6 +82,9 @@ def main(argv: list[str] | None = None) -> int:
         sys.stderr.write(f"bayes-amb {args.command}: error: {exc.filename or ''}: "
                          f"{exc.strerror or exc}\n")
         return 2
+    except KeyboardInterrupt:                 # Ctrl-C outside a study's own handling
+        sys.stderr.write(f"bayes-amb {args.command}: interrupted\n")
+        return 130
 
 
 if __name__ == "__main__":

@@ -5,9 +5,10 @@ from __future__ import annotations
 import argparse
 
 from bayes_amb.cli.common import emit
+from bayes_amb.cli.options import real
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.reduction.fidelity import singular_value_data
-from bayes_amb.rig import load_rig
+from bayes_amb.rig import check_speed_rpm, load_rig
 from bayes_amb.rotor import bending_frequencies_hz, full_model, unstable_poles
 
 
@@ -16,21 +17,19 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Build the full FE model (eq. 17) of a rig at a speed, "
                        "reduce it (eqs. 18-45) and print poles, bending frequencies and the "
                        "reduction error.")
-    p.add_argument("--rig", default=None, help="rig TOML file (default: the reference rig)")
-    p.add_argument("--speed-rpm", type=float, default=None,
-                   help="rotor speed in rpm (default: the rig's nominal speed)")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig TOML file (default: the reference rig)")
+    p.add_argument("--speed-rpm", type=real(), default=None, metavar="RPM",
+                   help="rotor speed, rpm, 0..2 x the rig's nominal speed (default: nominal, "
+                   "31500 on the reference rig)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 
 def model_summary(rig_path: str | None = None, speed_rpm: float | None = None) -> dict:
     """The data behind `bayes-amb model` (Python API)."""
     rig = load_rig(rig_path)
-    speed = rig.nominal_speed_rpm if speed_rpm is None else speed_rpm
-    if not (0 <= speed <= 2 * rig.nominal_speed_rpm):
-        from bayes_amb.errors import RigError
-        raise RigError(f"option --speed-rpm: value {speed} out of range 0..."
-                       f"{2 * rig.nominal_speed_rpm:g}")
+    speed = check_speed_rpm(rig, speed_rpm)
     fm = full_model(rig, speed)
     red = reduce_pseudo_modal(fm)
     sv = singular_value_data(red)

@@ -13,8 +13,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("params", help="list the uncertain-parameter names",
                        description="List every parameter name with its meaning, physical "
                        "scale (value per unit theta) and unit.")
-    p.add_argument("--rig", default=None, help="rig TOML file (default: the reference rig)")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig TOML file (default: the reference rig)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 

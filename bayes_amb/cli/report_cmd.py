@@ -22,12 +22,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="the recording (default: the path in summary.json, tried as given, "
                    "then next to RUN_DIR)")
     p.add_argument("--study", action="append", default=[], metavar="DIR",
-                   help="a finished study folder to include (repeatable)")
+                   help="a finished study folder to include (repeatable; default none)")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default RUN_DIR)")
-    p.add_argument("--no-pdf", action="store_true", help="write the HTML only")
+    p.add_argument("--no-pdf", action="store_true",
+                   help="write the HTML only (default: HTML and PDF)")
     p.add_argument("--pdf-backend", choices=PDF_BACKENDS, default="auto",
-                   help="auto: WeasyPrint, else matplotlib (default auto)")
-    p.add_argument("--json", action="store_true", help="print what was written as JSON")
+                   help=f"PDF writer, one of {', '.join(PDF_BACKENDS)}; auto: WeasyPrint, "
+                   "else matplotlib (default auto)")
+    p.add_argument("--json", action="store_true",
+                   help="print what was written as JSON (default: text)")
     p.set_defaults(func=run)
 
 

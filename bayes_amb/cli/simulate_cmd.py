@@ -7,12 +7,14 @@ import argparse
 import numpy as np
 
 from bayes_amb.cli.common import emit
+from bayes_amb.cli.options import real, seed
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.errors import ParameterError
 from bayes_amb.io.controller_file import load_controller
 from bayes_amb.io.recording import save_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import EXCITATIONS, SimulationConfig, parse_effect, simulate_recording
+from bayes_amb.simulate.effects import describe_effects
 from bayes_amb.uncertainty import get_spec
 
 
@@ -21,30 +23,51 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Simulate the truth plant (full FE or reduced) in closed "
                        "loop with a controller and write NAME.csv and NAME.json. The paper's "
                        "case: --truth reduced --set k_By=0.5 --dt 1e-3 --duration 0.5.")
-    p.add_argument("--rig", default=None, help="rig TOML file (default: the reference rig)")
-    p.add_argument("--controller", default=None, help="controller JSON (default: the "
-                   "reference controller designed for the rig and dt)")
-    p.add_argument("--truth", choices=("full", "reduced"), default="full")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig TOML file (default: the reference rig)")
+    p.add_argument("--controller", default=None, metavar="FILE", help="controller JSON "
+                   "(default: the reference controller designed for the rig and --dt)")
+    p.add_argument("--truth", choices=("full", "reduced"), default="full",
+                   help="truth plant: full (the 320-state FE model) or reduced (the 8-state "
+                   "identification model) (default full)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=THETA",
-                   help="true parameter value, e.g. k_By=0.5 (repeatable)")
+                   help="true parameter value, theta in -0.95..0.95, e.g. k_By=0.5 "
+                   "(repeatable; default: every parameter 0; names: bayes-amb params)")
     p.add_argument("--effect", action="append", default=[], metavar="NAME[:k=v,...]",
-                   help="hidden physics, e.g. actuator_lag:bandwidth_hz=600 (repeatable)")
-    p.add_argument("--excitation", choices=EXCITATIONS, default="random-binary")
-    p.add_argument("--amplitude", type=float, default=0.5, help="excitation amplitude, A")
-    p.add_argument("--band", default=None, metavar="LO,HI", help="multisine band, Hz "
-                   "(default 5 Hz to min(1 kHz, 0.8 Nyquist)); a narrow band informs only a "
-                   "combination of parameters")
-    p.add_argument("--r1-rms", type=float, default=0.0, help="sensor-side disturbance RMS, m")
-    p.add_argument("--r2-rms", type=float, default=0.0, help="actuator-side disturbance RMS, A")
-    p.add_argument("--r1-band-hz", type=float, default=None, help="r1 low-pass band, Hz")
-    p.add_argument("--r2-band-hz", type=float, default=None, help="r2 low-pass band, Hz")
-    p.add_argument("--noise-rms", type=float, default=0.0, help="sensor noise RMS, m")
-    p.add_argument("--duration", type=float, default=0.5, help="record length, s")
-    p.add_argument("--dt", type=float, default=1e-4, help="sample time, s")
-    p.add_argument("--speed-rpm", type=float, default=None, help="rotor speed (default nominal)")
-    p.add_argument("--seed", type=int, default=0)
-    p.add_argument("-o", "--output", required=True, metavar="NAME.csv")
-    p.add_argument("--json", action="store_true", help="print JSON")
+                   help="hidden physics, e.g. actuator_lag:bandwidth_hz=600 (repeatable; "
+                   "default none). Effects and parameters (default, allowed): "
+                   + "; ".join(describe_effects()))
+    p.add_argument("--excitation", choices=EXCITATIONS, default="random-binary",
+                   help=f"excitation signal, one of {', '.join(EXCITATIONS)} "
+                   "(default random-binary)")
+    p.add_argument("--amplitude", type=real(0, lo_open=True, unit="A"), default=0.5,
+                   metavar="A", help="excitation amplitude, A, > 0 (default 0.5, about 10 %% "
+                   "of a 5 A saturation current)")
+    p.add_argument("--band", default=None, metavar="LO,HI", help="multisine band, Hz, "
+                   "0 < LO < HI <= Nyquist (default 5 Hz to min(1 kHz, 0.8 Nyquist)); a "
+                   "narrow band informs only a combination of parameters")
+    p.add_argument("--r1-rms", type=real(0, unit="m"), default=0.0, metavar="M",
+                   help="sensor-side disturbance r1, RMS in m, >= 0 (default 0)")
+    p.add_argument("--r2-rms", type=real(0, unit="A"), default=0.0, metavar="A",
+                   help="actuator-side disturbance r2, RMS in A, >= 0 (default 0)")
+    p.add_argument("--r1-band-hz", type=real(0, lo_open=True, unit="Hz"), default=None,
+                   metavar="HZ", help="low-pass band of r1, Hz, > 0 (default: white)")
+    p.add_argument("--r2-band-hz", type=real(0, lo_open=True, unit="Hz"), default=None,
+                   metavar="HZ", help="low-pass band of r2, Hz, > 0 (default: white)")
+    p.add_argument("--noise-rms", type=real(0, unit="m"), default=0.0, metavar="M",
+                   help="sensor noise RMS, m, >= 0 (default 0)")
+    p.add_argument("--duration", type=real(0, 600, lo_open=True, unit="s"), default=0.5,
+                   metavar="S", help="record length, s, > 0 and <= 600 (default 0.5)")
+    p.add_argument("--dt", type=real(0, 0.01, lo_open=True, unit="s"), default=1e-4,
+                   metavar="S", help="sample time, s, > 0 and <= 0.01 (default 1e-4)")
+    p.add_argument("--speed-rpm", type=real(0, unit="rpm"), default=None, metavar="RPM",
+                   help="rotor speed, rpm, 0..2 x the rig's nominal speed (default: nominal, "
+                   "31500 on the reference rig)")
+    p.add_argument("--seed", type=seed, default=0, help="random seed, 0..4294967295 "
+                   "(default 0)")
+    p.add_argument("-o", "--output", required=True, metavar="NAME.csv",
+                   help="recording to write: NAME.csv and its sidecar NAME.json (required)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 
@@ -76,11 +99,6 @@ def parse_band(text: str | None) -> tuple[float, float] | None:
 
 
 def run(args: argparse.Namespace) -> int:
-    rig = load_rig(args.rig)
-    if args.controller:
-        ctrl = load_controller(args.controller)
-    else:
-        ctrl = export_controller(reference_controller(rig, args.dt, args.speed_rpm), rig)
     cfg = SimulationConfig(truth=args.truth, params=parse_assignments(args.set),
                            effects=tuple(parse_effect(e) for e in args.effect),
                            excitation=args.excitation, amplitude=args.amplitude,
@@ -89,6 +107,12 @@ def run(args: argparse.Namespace) -> int:
                            r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz,
                            duration=args.duration, dt=args.dt, speed_rpm=args.speed_rpm,
                            seed=args.seed)
+    cfg.validate()                          # the options first, before any expensive work
+    rig = load_rig(args.rig)
+    if args.controller:
+        ctrl = load_controller(args.controller)
+    else:
+        ctrl = export_controller(reference_controller(rig, args.dt, args.speed_rpm), rig)
     rec, truth = simulate_recording(rig, ctrl, cfg)
     csv_path, json_path = save_recording(args.output, rec, truth=truth)
     rms_y = np.sqrt(np.mean(np.asarray(rec.y) ** 2, axis=0))

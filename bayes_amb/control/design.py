@@ -114,7 +114,7 @@ def design_observer_controller(reduced: ReducedModel, dt: float = 1e-4,
     ((4, 8), (8, 4))
     """
     if not (np.isfinite(dt) and 0 < dt <= 1e-2):
-        raise ControllerError(f"option dt: expected 0 < dt <= 0.01 s, got {dt!r}")
+        raise ControllerError(f"option --dt: value {dt:g} out of range: must be > 0 and <= 0.01 s")
     s = settings or DesignSettings()
     s.validate()
     Ad, Bd = zoh(reduced.A, reduced.B, dt)

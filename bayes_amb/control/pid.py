@@ -208,7 +208,7 @@ def design_decentralised_pid(rig: Rig, dt: float = 1e-4,
     ((8, 8), (4, 4), True)
     """
     if not (np.isfinite(dt) and 0 < dt <= 1e-2):
-        raise ControllerError(f"option dt: expected 0 < dt <= 0.01 s, got {dt!r}")
+        raise ControllerError(f"option --dt: value {dt:g} out of range: must be > 0 and <= 0.01 s")
     s = settings or PIDSettings()
     s.validate(dt)
     gains = pid_gains(rig, s)

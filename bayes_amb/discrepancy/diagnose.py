@@ -58,7 +58,7 @@ from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
 from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.io.atomic import json_text, write_netcdf_atomic, write_text_atomic
-from bayes_amb.io.recording import Recording
+from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
 from bayes_amb.uncertainty import parse_param_list
 
@@ -214,6 +214,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     """
     opt = options or DiagnoseOptions()
     t0 = time.perf_counter()
+    require_excitation(recording)
     names = parse_param_list(",".join(BEARING_COEFFICIENTS) if params is None else params)
     say = opt.progress or (lambda _: None)
     fwd = ForwardModel(recording, names)

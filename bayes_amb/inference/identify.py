@@ -35,7 +35,7 @@ from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
 from bayes_amb.io.atomic import write_text_atomic
-from bayes_amb.io.recording import Recording
+from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
 NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 through the exact "
@@ -117,6 +117,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     """
     opt = options or IdentifyOptions()
     t0 = time.perf_counter()
+    require_excitation(recording)
     names = parse_param_list(params)
     prior_set = PriorSet.build(names, priors)
     forward = ForwardModel(recording, names)
@@ -160,7 +161,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     n_walkers = opt.walkers or max(24, 2 * ndim + 2)
     n_walkers += n_walkers % 2
     if n_walkers < 2 * ndim:
-        raise BayesAmbError(f"option --walkers: {n_walkers} is fewer than 2 x {ndim} dimensions")
+        raise BayesAmbError(f"option --walkers: value {n_walkers} out of range: must be >= "
+                            f"{2 * ndim} (2 x {ndim} sampled dimensions)")
     start = initial_ball(post, x_map, cov, n_walkers, rng)
     run = run_emcee(post, start, rng, n_steps=opt.steps, max_steps=opt.max_steps,
                     progress=opt.progress)

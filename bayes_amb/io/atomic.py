@@ -86,8 +86,11 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
     """
     target = Path(path)
     directory = target.parent
-    fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
-                                    dir=directory if str(directory) else ".")
+    try:
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp",
+                                        dir=directory if str(directory) else ".")
+    except OSError as exc:
+        raise _naming(exc, target) from None
     os.close(fd)
     tmp = Path(tmp_name)
     try:
@@ -100,10 +103,21 @@ def atomic_path(path: str | os.PathLike[str]) -> Iterator[Path]:
         with open(tmp, "r+b") as f:
             os.fsync(f.fileno())
         os.replace(tmp, target)
+    except OSError as exc:
+        tmp.unlink(missing_ok=True)
+        if tmp_name in (exc.filename, exc.filename2):
+            raise _naming(exc, target) from exc
+        raise
     except BaseException:
         tmp.unlink(missing_ok=True)
         raise
     _fsync_dir(directory)
+
+
+def _naming(exc: OSError, target: Path) -> OSError:
+    """The same OSError, naming the user's ``target`` instead of the temporary file (a
+    missing or unwritable directory, a full disk, a target that is a directory)."""
+    return type(exc)(exc.errno, exc.strerror, str(target))
 
 
 def write_bytes_atomic(path: str | os.PathLike[str], data: bytes) -> None:

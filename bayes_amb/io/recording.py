@@ -82,7 +82,8 @@ def _check_time(t: NDArray[np.float64], dt: float, where: str) -> None:
     d = np.diff(t)
     step = float(np.median(d))
     for bad, what in ((~(d > 0), "not strictly increasing"),
-                      (np.abs(d - step) > DT_RTOL * step, f"non-uniform (usual step {step!r})")):
+                      (np.abs(d - step) > DT_RTOL * step,
+                       f"non-uniform (usual step {step:.6g} s)")):
         if bad.any():
             i = int(np.argmax(bad)) + 1
             raise RecordingError(f"{where}: column t: {what} at {_row(i)}: t = "
@@ -168,6 +169,26 @@ class Recording:
     def n_samples(self) -> int:
         """Number of samples N."""
         return self.t.shape[0]
+
+
+def require_excitation(recording: Recording) -> None:
+    """Refuse a recording whose excitation is zero on every channel of every group.
+
+    Identification and diagnosis call this first: without excitation S(theta) x is zero
+    for every theta and the likelihood is flat, so an optimiser would return its start with
+    "NOT converged" and no reason.
+
+    Raises
+    ------
+    RecordingError
+        ``recording NAME.csv: eta is zero on every channel: nothing to identify from``.
+    """
+    if any(np.any(np.asarray(v) != 0) for v in recording.excitation.values()):
+        return
+    groups = "/".join(recording.excitation)
+    verb = "is" if len(recording.excitation) == 1 else "are"
+    raise RecordingError(f"recording {recording.source}: {groups} {verb} zero on every "
+                         "channel: nothing to identify from")
 
 
 def recording_paths(path: str | os.PathLike[str]) -> tuple[Path, Path]:

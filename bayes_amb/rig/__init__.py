@@ -1,5 +1,13 @@
 """Rig description: the reference turboexpander and user rig files (TOML)."""
 
-from bayes_amb.rig.rig import CHANNELS, Disc, Rig, Shaft, load_rig, rig_from_dict
+from bayes_amb.rig.rig import (
+    CHANNELS,
+    Disc,
+    Rig,
+    Shaft,
+    check_speed_rpm,
+    load_rig,
+    rig_from_dict,
+)
 
-__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "load_rig", "rig_from_dict"]
+__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "check_speed_rpm", "load_rig", "rig_from_dict"]

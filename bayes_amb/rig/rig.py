@@ -261,3 +261,27 @@ def load_rig(path: str | Path | None = None) -> Rig:
         text = resources.files("bayes_amb.rig").joinpath("data/reference.toml").read_text()
         return rig_from_dict(tomllib.loads(text), source="reference")
     return rig_from_dict(read_toml(path, "rig file", RigError), source=str(Path(path)))
+
+
+def check_speed_rpm(rig: Rig, speed_rpm: float | None = None) -> float:
+    """The operating speed in rpm: ``speed_rpm``, or the rig's nominal speed when None.
+
+    Raises RigError (naming ``--speed-rpm``) unless 0 <= speed_rpm <= 2 x nominal, the
+    range over which the model and the controller are checked.
+
+    Examples
+    --------
+    >>> rig = load_rig()
+    >>> check_speed_rpm(rig), check_speed_rpm(rig, 1000)
+    (31500.0, 1000.0)
+    >>> check_speed_rpm(rig, -5)
+    Traceback (most recent call last):
+    ...
+    bayes_amb.errors.RigError: option --speed-rpm: value -5 out of range: must be in 0..63000 rpm
+    """
+    speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
+    top = 2 * rig.nominal_speed_rpm
+    if not 0 <= speed <= top:                       # also refuses nan
+        raise RigError(f"option --speed-rpm: value {speed:g} out of range: must be in "
+                       f"0..{top:g} rpm")
+    return speed

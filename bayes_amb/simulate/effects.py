@@ -90,8 +90,8 @@ def make_effect(name: str, **params: Any) -> Effect:
                                 f"got {v!r}") from None
         lo, hi = _RANGES[(name, k)]
         if not lo <= fv <= hi:
-            raise BayesAmbError(f"effect {name}: parameter {k}: value {fv:g} out of range "
-                                f"[{lo:g}, {hi:g}]")
+            raise BayesAmbError(f"effect {name}: parameter {k}: value {fv:g} out of range: "
+                                f"must be in {lo:g}..{hi:g}")
         out[k] = int(fv) if k == "n_modes" else fv
     return Effect(name, out)
 
@@ -106,3 +106,26 @@ def parse_effect(text: str) -> Effect:
             raise BayesAmbError(f"option --effect: {text!r}: expected key=value, got {item!r}")
         params[k.strip()] = v.strip()
     return make_effect(name.strip(), **params)
+
+
+def describe_effects() -> list[str]:
+    """One line per effect: its parameters with default and allowed values (for --help).
+
+    Examples
+    --------
+    >>> describe_effects()[1]
+    'time_delay: delay_s=5e-05 (0..0.01)'
+    """
+    lines = []
+    for name, defaults in EFFECT_DEFAULTS.items():
+        parts = []
+        for k, v in defaults.items():
+            if (name, k) in _CHOICES:
+                allowed = "/".join(_CHOICES[(name, k)])
+            else:
+                lo, hi = _RANGES[(name, k)]
+                allowed = f"{lo:g}..{hi:g}"
+            parts.append(f"{k}={v:g} ({allowed})" if isinstance(v, float | int)
+                         else f"{k}={v} ({allowed})")
+        lines.append(f"{name}: {', '.join(parts)}")
+    return lines

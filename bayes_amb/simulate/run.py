@@ -15,7 +15,7 @@ from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.controller_file import ControllerFile, check_fits_rig
 from bayes_amb.io.recording import Recording, make_recording
-from bayes_amb.rig import Rig
+from bayes_amb.rig import Rig, check_speed_rpm
 from bayes_amb.simulate.effects import Effect
 from bayes_amb.simulate.loop import simulate_loop
 from bayes_amb.simulate.signals import excitation, gaussian_noise
@@ -52,21 +52,33 @@ class SimulationConfig:
     seed: int = 0
 
     def validate(self) -> None:
-        for name in ("amplitude", "noise_rms", "r1_rms", "r2_rms"):
+        if not (np.isfinite(self.amplitude) and self.amplitude > 0):
+            raise BayesAmbError(f"option --amplitude: value {self.amplitude:g} out of range: "
+                                "must be > 0 A (without excitation nothing can be identified)")
+        for name, unit in (("noise_rms", "m"), ("r1_rms", "m"), ("r2_rms", "A")):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
-                raise BayesAmbError(f"option --{name.replace('_', '-')}: expected a "
-                                    f"non-negative number, got {v!r}")
+                raise BayesAmbError(f"option --{name.replace('_', '-')}: value {v:g} out of "
+                                    f"range: must be >= 0 {unit}")
+        for name in ("r1_band_hz", "r2_band_hz"):
+            v = getattr(self, name)
+            if v is not None and not (np.isfinite(v) and v > 0):
+                raise BayesAmbError(f"option --{name.replace('_', '-')}: value {v:g} out of "
+                                    "range: must be > 0 Hz")
         if not (np.isfinite(self.duration) and 0 < self.duration <= 600):
-            raise BayesAmbError(f"option --duration: expected 0 < s <= 600, got {self.duration!r}")
+            raise BayesAmbError(f"option --duration: value {self.duration:g} out of range: "
+                                "must be > 0 and <= 600 s")
         if not (np.isfinite(self.dt) and 0 < self.dt <= 1e-2):
-            raise BayesAmbError(f"option --dt: expected 0 < s <= 0.01, got {self.dt!r}")
+            raise BayesAmbError(f"option --dt: value {self.dt:g} out of range: must be > 0 "
+                                "and <= 0.01 s")
         if round(self.duration / self.dt) < 2:
-            raise BayesAmbError(f"option --duration: {self.duration} s is shorter than 2 samples")
+            raise BayesAmbError(f"option --duration: {self.duration:g} s is shorter than 2 "
+                                f"samples of --dt {self.dt:g} s")
         for name, th in self.params.items():
             get_spec(name)
             if not (np.isfinite(th) and -0.95 <= th <= 0.95):
-                raise BayesAmbError(f"option --set: {name}={th!r} out of range [-0.95, 0.95]")
+                raise BayesAmbError(f"option --set: {name}: value {th:g} out of range: must "
+                                    "be in -0.95..0.95")
         if self.excitation_band_hz is not None:
             band = self.excitation_band_hz
             if self.excitation != "multisine":
@@ -74,10 +86,12 @@ class SimulationConfig:
                                     f"(excitation is {self.excitation!r})")
             if not (len(band) == 2 and all(np.isfinite(band))
                     and 0 < band[0] < band[1] <= 0.5 / self.dt):
-                raise BayesAmbError(f"option --band: expected 0 < lo < hi <= Nyquist "
-                                    f"{0.5 / self.dt:g} Hz, got {list(band)!r}")
-        if self.seed < 0:
-            raise BayesAmbError(f"option --seed: expected a non-negative integer, got {self.seed}")
+                raise BayesAmbError(f"option --band: value {band[0]:g},{band[1]:g} out of "
+                                    f"range: must be 0 < LO < HI <= {0.5 / self.dt:g} Hz "
+                                    "(Nyquist)")
+        if not 0 <= self.seed < 2**32:
+            raise BayesAmbError(f"option --seed: value {self.seed} out of range: must be in "
+                                "0..4294967295")
 
     def truth_dict(self, speed_rpm: float) -> dict[str, Any]:
         d = asdict(self)
@@ -101,10 +115,7 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
     if abs(controller.dt - config.dt) > 1e-12 * config.dt:
         raise BayesAmbError(f"controller {controller.source}: field dt: {controller.dt} s "
                             f"does not match the simulation dt {config.dt} s")
-    speed = rig.nominal_speed_rpm if config.speed_rpm is None else float(config.speed_rpm)
-    if not 0 <= speed <= 2 * rig.nominal_speed_rpm:
-        raise BayesAmbError(f"option --speed-rpm: value {speed} out of range 0.."
-                            f"{2 * rig.nominal_speed_rpm:g}")
+    speed = check_speed_rpm(rig, config.speed_rpm)
     n = round(config.duration / config.dt)
     streams = np.random.default_rng(config.seed).spawn(4)
     exc = excitation(config.excitation, n, 4, config.amplitude, streams[0], config.dt,

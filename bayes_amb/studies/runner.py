@@ -3,6 +3,8 @@
 Results are appended to DIR/results.jsonl one line per finished replicate (O_APPEND, flushed
 and fsync'd), so killing a study loses at most the replicates in flight; starting it again
 skips every replicate already recorded. The final tables are rebuilt from that file.
+SIGINT and SIGTERM stop a study cleanly (:mod:`bayes_amb.studies.stopping`): no new work,
+finished replicates written, workers terminated, :class:`StudyInterrupted` raised.
 
 With ``workers > 1`` the pool starts its processes with forkserver (and Dask with spawn), so
 a script that calls :func:`run_study` must guard its top level with
@@ -12,18 +14,28 @@ a script that calls :func:`run_study` must guard its top level with
 from __future__ import annotations
 
 import json
+import logging
 import multiprocessing
 import os
+import signal
 import sys
+import threading
+import time
 from collections.abc import Iterable, Iterator
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 from typing import Any
 
 from bayes_amb import __version__
+from bayes_amb.errors import StudyInterrupted
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.studies.replicate import replicate_id, replicate_seeds, run_replicate
-from bayes_amb.studies.spec import StudySpec
+from bayes_amb.studies.spec import StudyError, StudySpec
+from bayes_amb.studies.stopping import StopSignals, kill_processes, worker_init
+
+_DASK_LOG_ENV = "DASK_LOGGING__DISTRIBUTED"
+_POLL_S = 0.2          # how often the parent looks for finished replicates and signals
 
 
 def read_rows(path: Path) -> list[dict[str, Any]]:
@@ -72,38 +84,113 @@ def pending(spec: StudySpec, done: set[str]) -> list[tuple[int, int]]:
             if replicate_id(c, r) not in done]
 
 
-def _pool_results(spec: StudySpec, todo: list[tuple[int, int]], workers: int
-                  ) -> Iterator[dict[str, Any]]:
+def _pool_results(spec: StudySpec, todo: list[tuple[int, int]], workers: int,
+                  stop: StopSignals) -> Iterator[dict[str, Any]]:
     if workers <= 1:
         for c, r in todo:
-            yield run_replicate(spec, c, r)
+            if stop.stopped:
+                return
+            stop.interruptible = True               # a signal raises StudyInterrupted here
+            try:
+                row = run_replicate(spec, c, r)
+            finally:
+                stop.interruptible = False
+            yield row
         return
     # forkserver, not fork: the parent may already run threads (tqdm's monitor, scipy's FFT
     # pool), and forking a threaded process can deadlock the child
-    with ProcessPoolExecutor(max_workers=workers,
-                             mp_context=multiprocessing.get_context("forkserver")) as pool:
-        futures = [pool.submit(run_replicate, spec, c, r) for c, r in todo]
-        for fut in as_completed(futures):
-            yield fut.result()
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=worker_init,
+                               initargs=(os.getpid(),),
+                               mp_context=multiprocessing.get_context("forkserver"))
+
+    def workers_of_pool() -> list[Any]:
+        return list((getattr(pool, "_processes", None) or {}).values())
+
+    stop.on_hard_stop(lambda: [p.kill() for p in workers_of_pool()])
+    clean = False
+    try:
+        left = {pool.submit(run_replicate, spec, c, r) for c, r in todo}
+        while left and not stop.stopped:
+            done, left = wait(left, timeout=_POLL_S, return_when=FIRST_COMPLETED)
+            yield from _finished_rows(done, stop)
+        if stop.stopped:                            # flush what finished meanwhile
+            yield from _finished_rows({f for f in left if f.done()}, stop)
+        clean = not stop.stopped
+    finally:
+        if clean:
+            pool.shutdown(wait=True)
+        else:
+            procs = workers_of_pool()
+            pool.shutdown(wait=False, cancel_futures=True)
+            kill_processes(procs)
+
+
+def _finished_rows(done: Iterable[Future], stop: StopSignals) -> Iterator[dict[str, Any]]:
+    """The rows of finished futures; a worker killed by the signal that stops the study
+    (SIGTERM to the process group) ends the stream instead of raising."""
+    for fut in done:
+        if fut.cancelled():
+            continue
+        exc = fut.exception()
+        if isinstance(exc, BrokenProcessPool):
+            t_end = time.monotonic() + 2.0          # our own handler may run a moment later
+            while not stop.stopped and time.monotonic() < t_end:
+                time.sleep(0.05)
+            if stop.stopped:
+                continue
+            raise StudyError("study: a worker process died unexpectedly (killed from "
+                             "outside?); finished replicates are saved, run the same "
+                             "command with --resume") from exc
+        yield fut.result()
 
 
 def _dask_results(spec: StudySpec, todo: list[tuple[int, int]], scheduler: str | None,
-                  n_local: int | None) -> Iterator[dict[str, Any]]:
+                  n_local: int | None, stop: StopSignals) -> Iterator[dict[str, Any]]:
     from dask.distributed import Client, LocalCluster
-    from dask.distributed import as_completed as dask_completed
 
     cluster = None
     if scheduler is None:
-        cluster = LocalCluster(n_workers=n_local or 2, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        quiet = logging.getLogger().getEffectiveLevel() > logging.INFO
+        if quiet:                                   # Dask logs at INFO by default
+            logging.getLogger("distributed").setLevel(logging.ERROR)
+        # the worker processes are spawned with SIGINT ignored (kept across exec), so a
+        # Ctrl-C to the process group reaches only this process, which stops them itself
+        old = (signal.signal(signal.SIGINT, signal.SIG_IGN)
+               if threading.current_thread() is threading.main_thread() else None)
+        # the spawned workers read their logging level from the environment at import
+        env_before = os.environ.get(_DASK_LOG_ENV)
+        if quiet:
+            os.environ[_DASK_LOG_ENV] = "critical"
+        try:
+            cluster = LocalCluster(n_workers=n_local or 2, threads_per_worker=1,
+                                   processes=True, dashboard_address=None)
+        finally:
+            if old is not None:
+                signal.signal(signal.SIGINT, old)
+            if env_before is None:
+                os.environ.pop(_DASK_LOG_ENV, None)
+            else:
+                os.environ[_DASK_LOG_ENV] = env_before
         client = Client(cluster)
     else:
         client = Client(scheduler)
+    left: list[Any] = []
     try:
-        futures = [client.submit(run_replicate, spec, c, r, pure=False) for c, r in todo]
-        for fut in dask_completed(futures):
-            yield fut.result()
+        left = [client.submit(run_replicate, spec, c, r, pure=False) for c, r in todo]
+        while left and not stop.stopped:
+            flags = [f.done() for f in left]
+            done = [f for f, d in zip(left, flags, strict=True) if d]
+            left = [f for f, d in zip(left, flags, strict=True) if not d]
+            if not done:
+                time.sleep(_POLL_S)
+            for fut in done:
+                yield fut.result()
+        if stop.stopped:
+            for fut in [f for f in left if f.done() and f.status == "finished"]:
+                yield fut.result()
     finally:
+        if stop.stopped and left:
+            client.cancel(left)
         client.close()
         if cluster is not None:
             cluster.close()
@@ -119,14 +206,21 @@ def study_manifest(spec: StudySpec) -> dict[str, Any]:
 def run_study(spec: StudySpec, out_dir: str | Path, *, workers: int = 2,
               dask_local: int | None = None, scheduler: str | None = None,
               progress: bool = False) -> list[dict[str, Any]]:
-    """Run every replicate not yet in OUT/results.jsonl; returns all rows, sorted by id."""
+    """Run every replicate not yet in OUT/results.jsonl; returns all rows, sorted by id.
+
+    Raises
+    ------
+    StudyInterrupted
+        On SIGINT or SIGTERM (main thread only): no new replicate starts, the finished ones
+        are written, the workers are terminated, and the exception says how many replicates
+        are saved. Calling run_study again with the same folder resumes.
+    """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     manifest = out / "study.json"
     if manifest.is_file():
         old = json.loads(manifest.read_text(encoding="utf-8"))
         if old.get("study") != json.loads(json.dumps(spec.to_dict(), default=_jsonable)):
-            from bayes_amb.studies.spec import StudyError
             raise StudyError(f"study folder {out}: field study.json: it holds results of a "
                              "different study definition; use another --out folder")
     write_text_atomic(manifest, json.dumps(study_manifest(spec), indent=2,
@@ -135,20 +229,29 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, workers: int = 2,
     drop_torn_tail(results)
     done = {r["id"] for r in read_rows(results)}
     todo = pending(spec, done)
-    if dask_local or scheduler:
-        stream: Iterable[dict[str, Any]] = _dask_results(spec, todo, scheduler, dask_local)
-    else:
-        stream = _pool_results(spec, todo, workers)
     bar = None
     if progress and todo:
         from tqdm import tqdm
         bar = tqdm(total=spec.n_replicates_total, initial=len(done), unit="replicate",
                    file=sys.stderr, desc=f"study {spec.name}")
+    n_saved = len(done)
     try:
-        for row in stream:
-            append_row(results, row)
-            if bar is not None:
-                bar.update(1)
+        with StopSignals() as stop:
+            if dask_local or scheduler:
+                stream: Iterable[dict[str, Any]] = _dask_results(spec, todo, scheduler,
+                                                                 dask_local, stop)
+            else:
+                stream = _pool_results(spec, todo, workers, stop)
+            for row in stream:
+                append_row(results, row)
+                n_saved += 1
+                if bar is not None:
+                    bar.update(1)
+            if stop.signum is not None:
+                raise StudyInterrupted(stop.signum)
+    except StudyInterrupted as exc:
+        raise StudyInterrupted(exc.signum, n_saved, spec.n_replicates_total,
+                               str(results)) from None
     finally:
         if bar is not None:
             bar.close()
