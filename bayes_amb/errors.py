@@ -31,3 +31,8 @@ class RecordingError(BayesAmbError):
 
 class LFTError(BayesAmbError):
     """An LFT is ill-posed or its blocks have inconsistent dimensions."""
+
+
+class DataImportError(BayesAmbError):
+    """A foreign DAQ file, its channel map or an imported controller is missing, malformed
+    or inconsistent."""
