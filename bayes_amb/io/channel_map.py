@@ -324,6 +324,8 @@ def _toml_value(v: Any) -> str:
                                                  ("inf" if v > 0 else "-inf"))
     if isinstance(v, str):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"').replace("\n", "\\n") + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
     raise TypeError(f"cannot write {type(v).__name__} as a TOML value")
 
 

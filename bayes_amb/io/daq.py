@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import logging
 import os
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -152,11 +153,39 @@ def _read_h5(p: Path, names: list[str], fmt: str) -> tuple[dict, dict]:
     return out, {}
 
 
-def _read_tdms(p: Path, names: list[str]) -> tuple[dict, dict]:
-    from nptdms import TdmsFile
+class _Collect(logging.Handler):
+    def __init__(self) -> None:
+        super().__init__(logging.WARNING)
+        self.messages: list[str] = []
 
+    def emit(self, record: logging.LogRecord) -> None:
+        self.messages.append(record.getMessage())
+
+
+def _read_tdms_strict(p: Path, where: str) -> Any:
+    """TdmsFile.read, with npTDMS's warnings (truncated or damaged file) made errors."""
+    from nptdms import TdmsFile
+    from nptdms.log import log_manager
+
+    loggers = [logging.getLogger(n) for n in ("nptdms", *log_manager.loggers)]
+    saved = [(lg.propagate, lg.handlers[:]) for lg in loggers]
+    sink = _Collect()
+    for lg in loggers:
+        lg.propagate, lg.handlers = False, [sink]
+    try:
+        f = TdmsFile.read(p)
+    finally:
+        for lg, (prop, handlers) in zip(loggers, saved, strict=True):
+            lg.propagate, lg.handlers = prop, handlers
+    if sink.messages:
+        raise DataImportError(f"{where}: field <file>: damaged TDMS file "
+                              f"({short_repr(sink.messages[0], 100)})")
+    return f
+
+
+def _read_tdms(p: Path, names: list[str]) -> tuple[dict, dict]:
     where = f"source {p}"
-    f = TdmsFile.read(p)
+    f = _read_tdms_strict(p, where)
     available = sorted(f"{g.name}/{c.name}" for g in f.groups() for c in g.channels())
     out, inc = {}, {}
     for name in names:
@@ -175,10 +204,19 @@ def _read_tdms(p: Path, names: list[str]) -> tuple[dict, dict]:
 def _read_csv(p: Path, names: list[str]) -> tuple[dict, dict]:
     where = f"source {p}"
     with open(p, newline="", encoding="utf-8-sig") as f:
-        rows = [r for r in csv.reader(f) if any(c.strip() for c in r)]
+        reader = csv.reader(f)
+        rows, lines = [], []
+        for r in reader:
+            if any(c.strip() for c in r):
+                rows.append(r)
+                lines.append(reader.line_num)
     if not rows:
         raise DataImportError(f"{where}: field <file>: empty (expected a header row)")
     header = [c.strip() for c in rows[0]]
+    for i, row in enumerate(rows[1:]):
+        if len(row) != len(header):
+            raise DataImportError(f"{where}: row {i + 1} (line {lines[i + 1]}): expected "
+                                  f"{len(header)} cells as in the header, got {len(row)}")
     out = {}
     for name in names:
         if name not in header:
@@ -189,12 +227,11 @@ def _read_csv(p: Path, names: list[str]) -> tuple[dict, dict]:
                                   f"{header.count(name)} times")
         vals = np.empty(len(rows) - 1)
         for i, row in enumerate(rows[1:]):
-            cell = row[j] if j < len(row) else ""
             try:
-                vals[i] = float(cell)
+                vals[i] = float(row[j])
             except ValueError:
-                raise DataImportError(f"{where}: channel {name!r}: row {i + 1} (line {i + 2}):"
-                                      f" not a number: {short_repr(cell)}") from None
+                raise DataImportError(f"{where}: channel {name!r}: row {i + 1} (line {lines[i + 1]}):"
+                                      f" not a number: {short_repr(row[j])}") from None
         out[name] = vals
     return out, {}
 
