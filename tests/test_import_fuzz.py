@@ -25,6 +25,7 @@ from hypothesis import strategies as st
 from bayes_amb.io import ControllerFile, make_recording
 from bayes_amb.io.channel_map import map_to_toml
 from bayes_amb.io.daq_export import export_daq, realistic_channel_map
+from bayes_amb.io.daq_import import import_recording
 from tests.helpers import run_cli
 
 N, DT = 40, 1e-3
@@ -233,7 +234,13 @@ def _run(fmt: str, m: dict, files: dict, capsys) -> tuple[int, str, str, pathlib
 @pytest.mark.parametrize("fmt", list(SUFFIX))
 def test_the_unmutated_base_imports(fmt, capsys):
     code, out, err, written = _run(fmt, _base_map(fmt), {"fmt": fmt}, capsys)
-    assert code == 0 and written, err
+    assert code == 0 and written and out.startswith("wrote "), err
+    d = pathlib.Path(tempfile.mkdtemp())
+    CTRL.save(d / "ctrl.json")
+    (d / "map.toml").write_text(map_to_toml(_base_map(fmt)))
+    back = import_recording(export_daq(REC, d / f"daq{SUFFIX[fmt]}", _base_map(fmt)),
+                            d / "map.toml")
+    assert np.abs(back.u - REC.u).max() < 1e-14 and np.abs(back.y - REC.y).max() < 1e-20
 
 
 @settings(max_examples=320, deadline=None, derandomize=True)

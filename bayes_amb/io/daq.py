@@ -230,8 +230,9 @@ def _read_csv(p: Path, names: list[str]) -> tuple[dict, dict]:
             try:
                 vals[i] = float(row[j])
             except ValueError:
-                raise DataImportError(f"{where}: channel {name!r}: row {i + 1} (line {lines[i + 1]}):"
-                                      f" not a number: {short_repr(row[j])}") from None
+                raise DataImportError(f"{where}: channel {name!r}: row {i + 1} (line "
+                                      f"{lines[i + 1]}): not a number: {short_repr(row[j])}"
+                                      ) from None
         out[name] = vals
     return out, {}
 
