@@ -11,6 +11,7 @@ import pytest
 
 from bayes_amb.control.discrete import ss_freqresp
 from bayes_amb.control.pid import PIDSettings, continuous_pid, design_decentralised_pid, pid_gains
+from bayes_amb.errors import DataImportError
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.io import load_controller
 from bayes_amb.io.controller_import import import_controller
@@ -131,3 +132,29 @@ def test_identification_through_the_imported_controller_covers_the_truth(tmp_pat
         p = res.summary["parameters"][n]
         assert p["sd"] > 0 and abs(p["mean"] - v) < 3.0 * p["sd"], (n, p)
     assert res.summary["excitation_port"] != "eta"
+
+
+def test_a_channel_map_can_name_the_matlab_controller(tmp_path, pid):
+    from bayes_amb.io.channel_map import map_to_toml
+    from bayes_amb.io.daq import file_sha256
+    from bayes_amb.io.daq_export import export_daq, realistic_channel_map
+    from bayes_amb.io.daq_import import import_recording
+
+    A, B, C, D = _matlab_pid_continuous()
+    write_mat(tmp_path / "K.mat", {"A": A, "B": B, "C": C, "D": D, "Ts": 0.0}, v73=True)
+    ctrl = import_controller(tmp_path / "K.mat", dt=DT).controller
+    rec, _ = simulate_recording(load_rig(), ctrl, SimulationConfig(
+        truth="reduced", dt=DT, duration=0.05, seed=1))
+    m = realistic_channel_map("hdf5", ["r2"], controller="K.mat", speed_rpm=rec.speed_rpm)
+    m["recording"].update(controller_method="tustin", controller_feedback="negative")
+    (tmp_path / "map.toml").write_text(map_to_toml(m))
+    back = import_recording(export_daq(rec, tmp_path / "daq.h5", m), tmp_path / "map.toml")
+    assert np.array_equal(back.controller.D, ctrl.D) and back.controller.kind == "generic"
+    imp = back.meta["provenance"]["import"]
+    assert imp["controller_sha256"] == file_sha256(tmp_path / "K.mat")
+    # the options apply only to a .mat controller
+    m["recording"]["controller"] = "ctrl.json"
+    (tmp_path / "map.toml").write_text(map_to_toml(m))
+    with pytest.raises(DataImportError, match=r"field recording\.controller_method: applies "
+                                              r"only to a controller given as a MATLAB"):
+        import_recording(tmp_path / "daq.h5", tmp_path / "map.toml")

@@ -15,7 +15,8 @@ Example (a dSPACE .mat file, positions in volts, currents as amplifier set-point
     [recording]
     rig = "reference"            # or a rig TOML file
     speed_rpm = 31500.0
-    controller = "controller.json"   # the controller that ran (bayes-amb controller file)
+    controller = "controller.json"   # the controller that ran (bayes-amb controller file),
+                                     # or a MATLAB .mat (see below)
     notes = "run 17, rig hall B"
 
     [channels.y_Ax]
@@ -40,6 +41,12 @@ with ``factor``: displacements (``y``, ``r1``; SI m) ``m`` 1, ``mm`` 1e-3, ``um`
 ``A`` 1, ``mA`` 1e-3, ``V`` gain, ``mV`` 1e-3 gain. ``remove_offset = true`` subtracts
 the mean of the trimmed record instead of a given ``offset``. Relative paths are relative
 to the map file's folder.
+
+A controller given as a MATLAB .mat (state space or per-axis transfer functions, see
+:mod:`bayes_amb.io.controller_import`) is imported at the recording's sample time, with
+``controller_method`` (``"tustin"``, default, or ``"zoh"``), ``controller_prewarp_hz``
+and ``controller_feedback`` (``"negative"``, default, or ``"positive"``) in
+``[recording]``, and checked on the rig at ``speed_rpm``.
 """
 
 from __future__ import annotations
@@ -68,7 +75,8 @@ _VOLT = {"V": 1.0, "mV": 1e-3}
 _TOP = {"source", "time", "recording", "channels"}
 _SOURCE_KEYS = {"format"}
 _TIME_KEYS = {"column", "sample_rate_hz", "start_s", "stop_s", "decimate"}
-_REC_KEYS = {"rig", "speed_rpm", "controller", "notes"}
+_REC_KEYS = {"rig", "speed_rpm", "controller", "controller_method", "controller_prewarp_hz",
+             "controller_feedback", "notes"}
 _CHANNEL_KEYS = {"source", "unit", "sensitivity", "gain", "sign", "offset", "remove_offset"}
 MAX_DECIMATE = 1000
 
@@ -119,6 +127,7 @@ class ChannelMap:
     rig: str = "reference"
     speed_rpm: float = 0.0
     controller: str | None = None
+    controller_options: dict[str, Any] | None = None
     notes: str = ""
     raw: dict[str, Any] | None = None
     source: str = "<dict>"
@@ -257,6 +266,21 @@ def channel_map_from_dict(data: Any, source: str = "<dict>",
         raise r.fail("field recording.speed_rpm", "missing (the rotor speed during the "
                                                    "record, rpm)")
     ctrl = resolve(r.string(rec, "controller", "field recording.controller"))
+    copts: dict[str, Any] = {}
+    for key, allowed in (("controller_method", ("tustin", "zoh")),
+                         ("controller_feedback", ("negative", "positive"))):
+        if key in rec:
+            if rec[key] not in allowed:
+                raise r.fail(f"field recording.{key}", f"expected one of {list(allowed)}, got "
+                                                      f"{short_repr(rec[key])}")
+            copts[key.removeprefix("controller_")] = rec[key]
+    pre = r.number(rec, "controller_prewarp_hz", "field recording.controller_prewarp_hz",
+                   positive=True)
+    if pre is not None:
+        copts["prewarp_hz"] = pre
+    if copts and (ctrl is None or not ctrl.lower().endswith(".mat")):
+        raise r.fail(f"field recording.controller_{next(iter(copts))}", "applies only to a "
+                     "controller given as a MATLAB .mat file")
     notes = rec.get("notes", "")
     if not isinstance(notes, str):
         raise r.fail("field recording.notes", f"expected a string, got {short_repr(notes)}")
@@ -303,7 +327,8 @@ def channel_map_from_dict(data: Any, source: str = "<dict>",
     return ChannelMap(channels=specs, groups=tuple(groups), format=fmt,
                       time=TimeBase(column=column, sample_rate_hz=rate, start_s=start,
                                     stop_s=stop, decimate=q),
-                      rig=rig, speed_rpm=speed, controller=ctrl, notes=notes,
+                      rig=rig, speed_rpm=speed, controller=ctrl, controller_options=copts,
+                      notes=notes,
                       raw=data, source=source)
 
 

@@ -14,9 +14,11 @@ Steps, in this order (each stated in the recording's provenance):
 6. decimate by ``decimate`` with :func:`scipy.signal.decimate` (order-8 Chebyshev type I
    low-pass at 0.8 of the new Nyquist frequency, applied forward and backward: zero phase),
    in stages of at most 10;
-7. build and check the :class:`~bayes_amb.io.recording.Recording` with the rig, speed and
-   controller of the map. Its ``meta["provenance"]["import"]`` holds the source file's and
-   the map's sha256, the parsed map and the steps.
+7. load the controller (a controller file, or a MATLAB .mat imported at the new sample
+   time, see :mod:`bayes_amb.io.controller_import`) and build and check the
+   :class:`~bayes_amb.io.recording.Recording` with the rig, speed and controller of the
+   map. Its ``meta["provenance"]["import"]`` holds the sha256 of the source file, the map
+   and the controller file, the parsed map and the steps.
 
 Steps 4-6 are linear, so the imported signal is exactly (to float precision) the source's
 scaled and decimated signal; ``tests/test_daq_roundtrip.py`` checks it.
@@ -105,22 +107,32 @@ def _time_base(m: ChannelMap, data: dict[str, NDArray], inc: dict[str, float], w
                           "time.sample_rate_hz in the map")
 
 
-def _load_parts(m: ChannelMap, rig: Rig | str | None, controller: ControllerFile | str | None
-                ) -> tuple[Rig, ControllerFile]:
-    where = f"channel map {m.source}"
+def _load_rig(m: ChannelMap, rig: Rig | str | None) -> Rig:
     try:
-        rig_obj = rig if isinstance(rig, Rig) else load_rig(rig if rig is not None else m.rig)
+        return rig if isinstance(rig, Rig) else load_rig(rig if rig is not None else m.rig)
     except RigError as err:
-        raise DataImportError(f"{where}: field recording.rig: {err}") from None
+        raise DataImportError(f"channel map {m.source}: field recording.rig: {err}") from None
+
+
+def _load_controller(m: ChannelMap, controller: ControllerFile | str | None, rig: Rig,
+                     dt: float) -> tuple[ControllerFile, str | None]:
+    """The controller that ran, and the sha256 of its file (None for an object)."""
+    where = f"channel map {m.source}"
     ctrl = controller if controller is not None else m.controller
     if ctrl is None:
         raise DataImportError(f"{where}: field recording.controller: missing (the controller "
                               "file of the controller that ran)")
     if isinstance(ctrl, ControllerFile):
-        return rig_obj, ctrl
+        return ctrl, None
     try:
-        return rig_obj, load_controller(ctrl)
-    except ControllerError as err:
+        if str(ctrl).lower().endswith(".mat"):
+            from bayes_amb.io.controller_import import import_controller
+
+            imp = import_controller(ctrl, rig, dt=dt, speed_rpm=m.speed_rpm,
+                                    **(m.controller_options or {}))
+            return imp.controller, imp.controller.design["source_sha256"]
+        return load_controller(ctrl), file_sha256(ctrl)
+    except (ControllerError, DataImportError) as err:
         raise DataImportError(f"{where}: field recording.controller: {err}") from None
 
 
@@ -157,7 +169,10 @@ def import_recording(source: str | os.PathLike[str], mapping: str | os.PathLike[
         m, map_sha = channel_map_from_dict(mapping), None
     else:
         m, map_sha = load_channel_map(mapping), file_sha256(mapping)
-    rig_obj, ctrl = _load_parts(m, rig, controller)
+    rig_obj = _load_rig(m, rig)
+    if controller is None and m.controller is None:
+        raise DataImportError(f"channel map {m.source}: field recording.controller: missing "
+                              "(the controller file of the controller that ran)")
     names = [s.source for s in m.channels.values()]
     if m.time.column is not None:
         names.append(m.time.column)
@@ -199,6 +214,7 @@ def import_recording(source: str | os.PathLike[str], mapping: str | os.PathLike[
             x = sig.decimate(x, q, n=8, ftype="iir", zero_phase=True)
         signals[target] = x
     dt_out = dt * m.time.decimate
+    ctrl, ctrl_sha = _load_controller(m, controller, rig_obj, dt_out)
     groups = {g: np.column_stack([signals[f"{g}_{c}"] for c in CHANNELS])
               for g in ("y", "u", *m.groups)}
     n_out = groups["y"].shape[0]
@@ -207,6 +223,7 @@ def import_recording(source: str | os.PathLike[str], mapping: str | os.PathLike[
         "software": f"bayes-amb {__version__}",
         "source": str(src.path), "source_format": src.format, "source_sha256": src.sha256,
         "map": m.source, "map_sha256": map_sha, "mapping": m.raw,
+        "controller": ctrl.source, "controller_sha256": ctrl_sha,
         "conversion": "value = sign * factor(unit) * (raw - offset), then decimation",
         "samples_read": n, "sample_time_read_s": dt, "trim_samples": [i0, i1],
         "decimate": m.time.decimate,
