@@ -246,3 +246,29 @@ def _replace_channel(path, name, values, fmt):
         with h5py.File(path, "r+") as f:
             del f[name]
             f.create_dataset(name, data=values.reshape(1, -1) if fmt == "mat73" else values)
+
+
+def test_tdms_time_base_from_wf_increment_and_mat_struct_paths(case):
+    import scipy.io
+
+    d, rec = case
+    m = realistic_channel_map("tdms", ["eta"], controller="ctrl.json", speed_rpm=rec.speed_rpm)
+    src = export_daq(rec, d / "inc.tdms", m)
+    m["time"] = {}                       # no time column, no sample rate: wf_increment
+    back = import_recording(src, m, controller=rec.controller)
+    assert back.dt == DT and _rel(back.y, rec.y) < 1e-13
+    assert back.meta["provenance"]["import"]["sample_time_read_s"] == DT
+    # dSPACE-style: the channels inside a struct, addressed as data.NAME
+    m5 = realistic_channel_map("mat", ["eta"], controller="ctrl.json", speed_rpm=rec.speed_rpm)
+    flat = d / "flat.mat"
+    export_daq(rec, flat, m5)
+    raw = {k: v for k, v in scipy.io.loadmat(flat).items() if not k.startswith("__")}
+    scipy.io.savemat(d / "struct.mat", {"data": raw})
+    for c in m5["channels"].values():
+        c["source"] = "data." + c["source"]
+    m5["time"]["column"] = "data.time"
+    back5 = import_recording(d / "struct.mat", m5, controller=rec.controller)
+    assert _rel(back5.u, rec.u) < 1e-13
+    with pytest.raises(DataImportError, match=r"struct\.mat: channel 'data\.nope': not found"):
+        m5["channels"]["u_Ax"]["source"] = "data.nope"
+        import_recording(d / "struct.mat", m5, controller=rec.controller)
