@@ -54,3 +54,8 @@ class StudyInterrupted(KeyboardInterrupt):
     def exit_status(self) -> int:
         """128 + the signal number (130 for SIGINT, 143 for SIGTERM), as a shell reports."""
         return 128 + self.signum
+
+
+class DataImportError(BayesAmbError):
+    """A foreign DAQ file, its channel map or an imported controller is missing, malformed
+    or inconsistent."""

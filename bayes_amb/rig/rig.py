@@ -116,6 +116,8 @@ class Rig:
         }
 
 
+SHIPPED_RIGS = ("reference", "small_rotor")
+"""Rig files shipped in bayes_amb/rig/data/, loadable by name."""
 _TOP_KEYS = {"name", "description", "shaft", "discs", "bearings", "sensors", "damping",
              "operation", "uncertainty"}
 _SHAFT_KEYS = {"youngs_modulus", "density", "poisson", "diameter", "length", "n_nodes"}
@@ -249,17 +251,22 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
 
 
 def load_rig(path: str | Path | None = None) -> Rig:
-    """Load a rig: None or "reference" gives the shipped reference rig, else a TOML path.
+    """Load a rig: None or "reference" gives the shipped reference rig, a name in
+    ``SHIPPED_RIGS`` (e.g. "small_rotor", the example of docs/your_rig.md) another shipped
+    rig, anything else is a TOML path.
 
     Examples
     --------
     >>> rig = load_rig()
     >>> rig.n_nodes, rig.bearing_nodes["B"]
     (40, 33)
+    >>> load_rig("small_rotor").bearing_nodes
+    {'A': 5, 'B': 29}
     """
-    if path is None or str(path) == "reference":
-        text = resources.files("bayes_amb.rig").joinpath("data/reference.toml").read_text()
-        return rig_from_dict(tomllib.loads(text), source="reference")
+    if path is None or str(path) in SHIPPED_RIGS:
+        name = "reference" if path is None else str(path)
+        text = resources.files("bayes_amb.rig").joinpath(f"data/{name}.toml").read_text()
+        return rig_from_dict(tomllib.loads(text), source=name)
     return rig_from_dict(read_toml(path, "rig file", RigError), source=str(Path(path)))
 
 
