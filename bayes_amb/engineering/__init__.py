@@ -5,6 +5,13 @@ decrement), API 617-style stability and separation margins, ISO 14839-3 peak sen
 frequency responses, each propagated from the posterior draws of an identification.
 """
 
+from bayes_amb.engineering.frf import (
+    FrfEstimate,
+    FrfResult,
+    controller_response,
+    frequency_responses,
+    joint_io_frf,
+)
 from bayes_amb.engineering.loop import (
     MODE_LABELS,
     LoopModes,
@@ -22,6 +29,7 @@ from bayes_amb.engineering.quantities import (
     required_separation_margin,
 )
 
-__all__ = ["API617_LOGDEC", "MODE_LABELS", "Draws", "EngineeringResult", "LoopModes",
-           "Quantity", "closed_loop_modes", "draws_from", "log_decrement",
+__all__ = ["API617_LOGDEC", "MODE_LABELS", "Draws", "EngineeringResult", "FrfEstimate",
+           "FrfResult", "LoopModes", "Quantity", "closed_loop_modes", "controller_response",
+           "draws_from", "frequency_responses", "joint_io_frf", "log_decrement",
            "physical_quantities", "plant_matrices", "required_separation_margin"]
