@@ -82,3 +82,26 @@ def test_bad_segment_length_is_rejected():
         joint_io_frf([(x, x, x)], DT, 4)
     with pytest.raises(BayesAmbError, match="longer than every record"):
         joint_io_frf([(x, x, x)], DT, 512)
+
+
+def test_response_snr_is_infinite_without_noise_and_follows_the_noise_level(setup):
+    """Noise-free data: y is all excitation response (the rest is round-off). With sensor
+    noise, the rest is the noise as the loop shapes it, y_noisy - y_clean (same seed, same
+    excitation; the loop is linear), and the noise-driven part is not the bare sensor
+    noise: the loop amplifies it (|S| > 1 near crossover)."""
+    from bayes_amb.engineering.snr import excitation_response, response_snr_db
+
+    rig, ctrl, _ = setup
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3}, dt=DT, duration=4.0,
+                           seed=7)
+    clean, _ = simulate_recording(rig, ctrl, cfg)
+    assert np.all(response_snr_db(clean, {"k_By": 0.3}, "reduced") > 200)
+    sigma = 2e-7
+    noisy, _ = simulate_recording(rig, ctrl, SimulationConfig(
+        truth="reduced", params={"k_By": 0.3}, dt=DT, duration=4.0, seed=7,
+        noise_rms=sigma))
+    p_x = np.mean(excitation_response(clean, {"k_By": 0.3}, "reduced") ** 2, axis=0)
+    rest = np.mean((noisy.y - clean.y) ** 2, axis=0)
+    snr = response_snr_db(noisy, {"k_By": 0.3}, "reduced")
+    np.testing.assert_allclose(snr, 10 * np.log10(p_x / rest), atol=1e-6)
+    assert np.all(rest > sigma**2)

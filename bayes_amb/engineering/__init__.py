@@ -28,8 +28,10 @@ from bayes_amb.engineering.quantities import (
     physical_quantities,
     required_separation_margin,
 )
+from bayes_amb.engineering.snr import excitation_response, response_snr_db
 
 __all__ = ["API617_LOGDEC", "MODE_LABELS", "Draws", "EngineeringResult", "FrfEstimate",
            "FrfResult", "LoopModes", "Quantity", "closed_loop_modes", "controller_response",
-           "draws_from", "frequency_responses", "joint_io_frf", "log_decrement",
-           "physical_quantities", "plant_matrices", "required_separation_margin"]
+           "draws_from", "excitation_response", "frequency_responses", "joint_io_frf",
+           "log_decrement", "physical_quantities", "plant_matrices",
+           "required_separation_margin", "response_snr_db"]
