@@ -1,0 +1,344 @@
+"""Physical quantities from the posterior: :func:`physical_quantities`.
+
+Every quantity is a function of theta; its 90 % interval is the 5 % and 95 % quantiles of
+that function over (thinned) posterior draws, its value the median. The same function at
+theta = 0 is the nominal (as-designed) value, and at the true theta (simulated data) the
+truth.
+
+Sign convention (stated once, used everywhere): the bearing force on the rotor at an axis is
+
+    f = ki i + ks s - c s'
+
+with s the rotor displacement at the bearing. ks > 0 is the magnet's position stiffness (a
+negative spring: it destabilises), c > 0 is passive damping (it stabilises). "ks" below is
+ks as identified, ks (1 - theta_k); "c" is the identified damping theta_c c_ref
+(:mod:`bayes_amb.uncertainty.parameters`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import minimize_scalar
+
+from bayes_amb.engineering.loop import MODE_LABELS, closed_loop_modes, log_decrement
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.io.recording import Recording
+from bayes_amb.rig import CHANNELS
+from bayes_amb.uncertainty import get_spec, parse_param_list
+
+__all__ = ["API617_LOGDEC", "Draws", "EngineeringResult", "Quantity", "draws_from",
+           "physical_quantities", "required_separation_margin"]
+
+API617_LOGDEC = 0.1
+"""API 617-style stability criterion: every closed-loop mode with log dec > 0.1."""
+
+
+@dataclass(frozen=True)
+class Draws:
+    """Posterior draws of theta: ``names`` (p,) and ``theta`` (n, p), dimensionless."""
+
+    names: tuple[str, ...]
+    theta: NDArray
+
+    def __post_init__(self) -> None:
+        names = parse_param_list(self.names)
+        th = np.atleast_2d(np.asarray(self.theta, dtype=float))
+        if th.shape[1] != len(names):
+            raise BayesAmbError(f"draws: theta has {th.shape[1]} columns; expected "
+                                f"{len(names)} for {list(names)}")
+        object.__setattr__(self, "names", names)
+        object.__setattr__(self, "theta", th)
+
+    def as_dicts(self) -> list[dict[str, float]]:
+        return [dict(zip(self.names, (float(v) for v in row), strict=True))
+                for row in self.theta]
+
+
+def draws_from(source: Any, n_draws: int = 200, seed: int = 0) -> Draws:
+    """Thinned posterior draws from an identification result, a report RunData or Draws.
+
+    With emcee samples: ``n_draws`` evenly spaced draws of the flattened chains. Without
+    (MAP-only runs): draws from the Laplace normal N(mean, diag(sd^2)) of summary.json
+    (correlations are not stored there), with a numpy Generator seeded by ``seed``.
+    """
+    if isinstance(source, Draws):
+        th = source.theta
+        if th.shape[0] > n_draws:
+            th = th[np.linspace(0, th.shape[0] - 1, n_draws).round().astype(int)]
+        return Draws(source.names, th)
+    names = tuple(getattr(source, "names", ()))
+    flat = None
+    samples = getattr(source, "samples", None)
+    if samples is not None:                                  # IdentificationResult
+        flat = np.asarray(samples)[:, :, :len(names)].reshape(-1, len(names))
+    elif getattr(source, "posterior", None) is not None and hasattr(source, "draws"):
+        flat = np.stack([np.asarray(source.draws(n)).ravel() for n in names], axis=1)
+    if flat is not None:
+        idx = np.linspace(0, flat.shape[0] - 1, min(n_draws, flat.shape[0])).round()
+        return Draws(names, flat[idx.astype(int)])
+    summary = getattr(source, "summary", None)
+    if not names or not isinstance(summary, dict):
+        raise BayesAmbError(f"draws: cannot take posterior draws from {type(source).__name__}")
+    par = summary["parameters"]
+    mean = np.array([float(par[n]["mean"]) for n in names])
+    sd = np.array([float(par[n].get("sd") or 0.0) for n in names])
+    sd = np.where(np.isfinite(sd), sd, 0.0)
+    rng = np.random.default_rng(seed)
+    return Draws(names, mean + sd * rng.standard_normal((n_draws, len(names))))
+
+
+@dataclass(frozen=True)
+class Quantity:
+    """One derived quantity: median and 90 % interval [lo, hi] over the draws, the nominal
+    value (theta = 0), the unit, the group it belongs to and how many draws gave a finite
+    value."""
+
+    name: str
+    unit: str
+    group: str
+    value: float
+    lo: float
+    hi: float
+    nominal: float
+    n_valid: int
+    estimated: bool = True
+
+    def covers(self, truth: float) -> bool:
+        return bool(self.lo <= truth <= self.hi)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"unit": self.unit, "group": self.group, "value": self.value,
+                "hdi90": [self.lo, self.hi], "nominal": self.nominal,
+                "n_valid": self.n_valid, "estimated": self.estimated}
+
+
+def required_separation_margin(zeta: NDArray, below: NDArray) -> NDArray:
+    """API 617-style required separation margin (%) from the amplification factor.
+
+    AF = 1/(2 zeta). AF < 2.5: no margin required (0). Otherwise, for a mode below the
+    running speed SM = 17 (1 - 1/(AF - 1.5)); above it SM = min(10 + 17 (1 - 1/(AF - 1.5)),
+    26).
+
+    Examples
+    --------
+    >>> required_separation_margin(np.array([0.5, 0.01, 0.01]), np.array([True, True, False]))
+    array([ 0.        , 16.64948454, 26.        ])
+    """
+    zeta = np.asarray(zeta, dtype=float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        af = 1.0 / (2.0 * zeta)
+        base = 17.0 * (1.0 - 1.0 / (af - 1.5))
+    req = np.where(below, base, np.minimum(10.0 + base, 26.0))
+    return np.where(af < 2.5, 0.0, req)
+
+
+@dataclass(frozen=True)
+class EngineeringResult:
+    """What :func:`physical_quantities` found.
+
+    quantities: name -> Quantity. speeds_rpm (n_s,); lam (n, n_s, 6) continuous closed-loop
+    eigenvalues per draw, speed and mode (MODE_LABELS), rad/s; lam_nominal (n_s, 6);
+    sens_freq_hz (n_f,), sens (n, n_f, 4) |S| per axis and sens_nominal (n_f, 4) at the
+    recording's speed; draws the theta draws used; model "full" or "reduced".
+    """
+
+    quantities: dict[str, Quantity]
+    speeds_rpm: NDArray
+    running_speed_rpm: float
+    lam: NDArray
+    lam_nominal: NDArray
+    sens_freq_hz: NDArray
+    sens: NDArray
+    sens_nominal: NDArray
+    draws: Draws
+    model: str
+    notes: tuple[str, ...] = field(default_factory=tuple)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": "bayes-amb-engineering/1", "model": self.model,
+                "speeds_rpm": self.speeds_rpm.tolist(),
+                "running_speed_rpm": self.running_speed_rpm,
+                "n_draws": int(self.draws.theta.shape[0]),
+                "interval": "5 % and 95 % quantiles over posterior draws",
+                "quantities": {k: q.to_dict() for k, q in self.quantities.items()},
+                "notes": list(self.notes)}
+
+
+def _mode_key(label: str, what: str, speed: float) -> str:
+    return f"{label}: {what} @ {speed:.0f} rpm"
+
+
+def _bearing_values(names: tuple[str, ...], theta: NDArray, rec: Recording
+                    ) -> dict[str, tuple[NDArray, str, bool]]:
+    """Per axis: ks as identified (N/m) and c (N s/m); kxy (N/m) where estimated."""
+    rig = rec.rig
+    out = {}
+    for ch in CHANNELS:
+        for kind, unit in (("k", "N/m"), ("c", "N s/m")):
+            n = f"{kind}_{ch}"
+            th = theta[:, names.index(n)] if n in names else np.zeros(theta.shape[0])
+            val = rig.ks * (1.0 - th) if kind == "k" else th * rig.c_ref
+            label = f"bearing {ch}: ks" if kind == "k" else f"bearing {ch}: c"
+            out[label] = (val, unit, n in names)
+    for n in names:
+        spec = get_spec(n)
+        if spec.kind == "kxy":
+            out[f"{spec.location}: kxy"] = (theta[:, names.index(n)] * rig.k_ref, "N/m", True)
+    return out
+
+
+def _summarise(name: str, unit: str, group: str, values: NDArray, nominal: float,
+               estimated: bool = True) -> Quantity:
+    v = np.asarray(values, dtype=float)
+    ok = v[np.isfinite(v)]
+    if ok.size == 0:
+        return Quantity(name, unit, group, float("nan"), float("nan"), float("nan"),
+                        float(nominal), 0, estimated)
+    lo, med, hi = np.quantile(ok, [0.05, 0.5, 0.95])
+    return Quantity(name, unit, group, float(med), float(lo), float(hi), float(nominal),
+                    int(ok.size), estimated)
+
+
+def _sens_grid(rec: Recording, n_freq: int) -> NDArray:
+    return np.logspace(0.0, np.log10(0.5 / rec.dt), n_freq)
+
+
+def physical_quantities(source: Any, recording: Recording,
+                        speeds_rpm: NDArray | list[float] | None = None, n_draws: int = 200,
+                        model: str = "full", n_freq: int = 400, seed: int = 0,
+                        track: str = "frequency") -> EngineeringResult:
+    """Bearing coefficients, closed-loop modes, API 617-style margins and ISO 14839-3 peak
+    sensitivities, with 90 % intervals propagated from posterior draws.
+
+    Parameters
+    ----------
+    source : IdentificationResult, RunData or Draws
+        Where the posterior draws come from (see :func:`draws_from`).
+    recording : Recording
+        Gives the rig, the controller that ran and the running speed.
+    speeds_rpm : array of float, optional
+        Speeds (rpm) of the mode table; default 0.8, 0.9, 1.0 and 1.05 times the
+        recording's speed. Modes are computed with the recorded controller at every speed.
+    n_draws : int
+        Draws used (evenly thinned).
+    model : {"full", "reduced"}
+        Plant the draws are put into: the full FE model (default) or the 8-state reduction.
+    track : {"frequency", "shape"}
+        How the rigid-body modes are labelled in every draw: by ascending frequency
+        (default; each frequency is then a continuous function of theta) or by matching
+        the nominal plant's mode shapes (a label follows its mode through a crossing, but
+        jumps where two modes veer).
+    n_freq : int
+        Frequencies of the sensitivity (log-spaced 1 Hz to Nyquist); each peak is refined
+        by a bounded search between the neighbours of the grid maximum.
+
+    Returns
+    -------
+    EngineeringResult
+
+    Examples
+    --------
+    >>> from bayes_amb.rig import load_rig
+    >>> from bayes_amb.control.export import export_controller, reference_controller
+    >>> from bayes_amb.io.recording import make_recording
+    >>> rig = load_rig()
+    >>> k = export_controller(reference_controller(rig, 1e-3), rig)
+    >>> z = np.zeros((4, 4))
+    >>> rec = make_recording(z, z, {"eta": z}, 1e-3, k, speed_rpm=31500.0, rig=rig)
+    >>> r = physical_quantities(Draws(("k_By",), [[0.5]]), rec, [31500.0], model="reduced")
+    >>> r.quantities["bearing By: ks"].value
+    500000.0
+    """
+    if track not in ("frequency", "shape"):
+        raise BayesAmbError(f"option track: expected 'frequency' or 'shape', got {track!r}")
+    draws = draws_from(source, n_draws, seed)
+    run = float(recording.speed_rpm)
+    speeds = np.array([0.8, 0.9, 1.0, 1.05]) * run if speeds_rpm is None \
+        else np.atleast_1d(np.asarray(speeds_rpm, dtype=float))
+    if speeds.size == 0 or np.any(~np.isfinite(speeds)) or np.any(speeds < 0):
+        raise BayesAmbError(f"option speeds: expected speeds >= 0 rpm, got {speeds.tolist()}")
+    rig, ctrl = recording.rig, recording.controller
+    i_run = int(np.argmin(np.abs(speeds - run)))
+    base_f = _sens_grid(recording, n_freq)
+    n = draws.theta.shape[0]
+    lam = np.full((n, speeds.size, len(MODE_LABELS)), np.nan + 0j)
+    lam_nom = np.full((speeds.size, len(MODE_LABELS)), np.nan + 0j)
+    peaks = np.full((n, 4), np.nan)
+    sens = np.full((n, base_f.size, 4), np.nan)
+    for j, s in enumerate(speeds):
+        nom = closed_loop_modes(rig, ctrl, s, {}, model)
+        lam_nom[j] = nom.lam
+        if j == i_run:
+            sens_nom = nom.sensitivity_diag(base_f)
+            peak_nom = _peaks(nom, base_f, sens_nom)
+        for i, th in enumerate(draws.as_dicts()):
+            lm = closed_loop_modes(rig, ctrl, s, th, model,
+                                   reference=nom if track == "shape" else None)
+            lam[i, j] = lm.lam
+            if j == i_run:
+                sens[i] = lm.sensitivity_diag(base_f)
+                peaks[i] = _peaks(lm, base_f, sens[i])
+    q: dict[str, Quantity] = {}
+    nominal_theta = np.zeros((1, len(draws.names)))
+    bear = _bearing_values(draws.names, draws.theta, recording)
+    bear_nom = _bearing_values(draws.names, nominal_theta, recording)
+    for k, (v, unit, est) in bear.items():
+        q[k] = _summarise(k, unit, "bearing", v, float(bear_nom[k][0][0]), est)
+    f_run = run / 60.0
+    for j, s in enumerate(speeds):
+        for m, label in enumerate(MODE_LABELS):
+            lm, ln = lam[:, j, m], lam_nom[j, m]
+            f, fn = lm.imag / (2 * np.pi), ln.imag / (2 * np.pi)
+            z, zn = -lm.real / np.abs(lm), -ln.real / np.abs(ln)
+            q[_mode_key(label, "frequency", s)] = _summarise(
+                _mode_key(label, "frequency", s), "Hz", "modes", f, fn)
+            q[_mode_key(label, "damping ratio", s)] = _summarise(
+                _mode_key(label, "damping ratio", s), "", "modes", z, zn)
+            q[_mode_key(label, "log dec", s)] = _summarise(
+                _mode_key(label, "log dec", s), "", "modes", log_decrement(lm),
+                float(log_decrement(np.array([ln]))[0]))
+            if j == i_run:
+                fr = s / 60.0
+                sm = 100 * np.abs(f - fr) / fr
+                smn = 100 * abs(fn - fr) / fr
+                q[f"{label}: separation margin"] = _summarise(
+                    f"{label}: separation margin", "%", "api617", sm, smn)
+                req = required_separation_margin(z, f < fr)
+                reqn = float(required_separation_margin(np.array([zn]),
+                                                        np.array([fn < fr]))[0])
+                q[f"{label}: required separation margin"] = _summarise(
+                    f"{label}: required separation margin", "%", "api617", req, reqn)
+        ld = log_decrement(lam[:, j])
+        ldn = log_decrement(lam_nom[j])
+        q[f"minimum log dec @ {s:.0f} rpm"] = _summarise(
+            f"minimum log dec @ {s:.0f} rpm", "", "api617",
+            np.where(np.all(np.isnan(ld), axis=1), np.nan, np.nanmin(
+                np.where(np.isnan(ld), np.inf, ld), axis=1)),
+            float(np.nanmin(ldn)) if np.any(np.isfinite(ldn)) else float("nan"))
+    for c, ch in enumerate(CHANNELS):
+        q[f"peak sensitivity {ch}"] = _summarise(
+            f"peak sensitivity {ch}", "dB", "iso14839", 20 * np.log10(peaks[:, c]),
+            float(20 * np.log10(peak_nom[c])))
+    notes = (f"running speed {run:.0f} rpm ({f_run:.1f} Hz)",
+             f"{n} posterior draws, plant model '{model}', controller from the recording")
+    return EngineeringResult(quantities=q, speeds_rpm=speeds, running_speed_rpm=run, lam=lam,
+                             lam_nominal=lam_nom, sens_freq_hz=base_f, sens=sens,
+                             sens_nominal=sens_nom, draws=draws, model=model, notes=notes)
+
+
+def _peaks(lm: Any, f: NDArray, mag: NDArray) -> NDArray:
+    """Peak |S_jj| per axis: the grid maximum refined by a bounded scalar search between
+    its neighbours (so that the peak is a smooth function of the plant, not of the grid)."""
+    out = np.empty(mag.shape[1])
+    for c in range(mag.shape[1]):
+        k = int(np.argmax(mag[:, c]))
+        lo, hi = f[max(k - 1, 0)], f[min(k + 1, f.size - 1)]
+        res = minimize_scalar(lambda x, c=c: -lm.sensitivity_diag(np.array([x]))[0, c],
+                              bounds=(lo, hi), method="bounded",
+                              options={"xatol": 1e-6 * f[k]})
+        out[c] = max(mag[k, c], -float(res.fun))
+    return out
