@@ -47,6 +47,7 @@ from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, build_truth, simulate_recording
+from bayes_amb.threads import limited_threads
 
 log = logging.getLogger(__name__)
 
@@ -259,6 +260,14 @@ def bench_map(quick: bool = False) -> MapBench:
                     eval_ratio=nm.n_evals / lb.n_evals)
 
 
+def bench_cli(quick: bool = False) -> Result:
+    """The README's paper case through the CLI in subprocesses, with and without
+    OPENBLAS_NUM_THREADS=1 (bayes_amb.bench.cli_case)."""
+    from bayes_amb.bench.cli_case import bench_cli as run
+
+    return run(quick)
+
+
 def bench_study(quick: bool = False) -> Result:
     """Study throughput (bayes_amb.bench.study_case): the 1000-replicate MAP + Laplace
     noise sweep of the paper's case through run_study on 2 workers (quick: 20)."""
@@ -269,16 +278,18 @@ def bench_study(quick: bool = False) -> Result:
 
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
-    "simulate": bench_simulate, "map": bench_map, "study": bench_study}
+    "simulate": bench_simulate, "map": bench_map, "cli": bench_cli, "study": bench_study}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
-"""What ``bayes-amb bench`` runs without --only (the study sweep takes minutes: ask for it
-with --only study)."""
+"""What ``bayes-amb bench`` runs without --only (the CLI runs and the study sweep take
+minutes: ask for them with --only cli, --only study)."""
 
 
+@limited_threads
 def run_benchmarks(names: list[str] | tuple[str, ...] | None = None, quick: bool = False
                    ) -> dict[str, Result]:
-    """Run the named benchmarks in BENCHMARKS order.
+    """Run the named benchmarks in BENCHMARKS order, BLAS threads limited as the CLI does
+    (bayes_amb.threads).
 
     Parameters
     ----------

@@ -168,7 +168,8 @@ def environment() -> dict[str, Any]:
     -------
     dict
         Versions of bayes_amb, Python, numpy, scipy and python-control, the machine, the
-        CPU count and OPENBLAS_NUM_THREADS / OMP_NUM_THREADS (None when unset).
+        CPU count and OPENBLAS_NUM_THREADS / OMP_NUM_THREADS / BAYES_AMB_THREADS (None
+        when unset).
     """
     import control
     import scipy
@@ -178,7 +179,8 @@ def environment() -> dict[str, Any]:
             "numpy": np.__version__, "scipy": scipy.__version__, "control": control.__version__,
             "machine": platform.machine(), "cpu_count": os.cpu_count(),
             "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
-            "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS")}
+            "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS"),
+            "BAYES_AMB_THREADS": os.environ.get("BAYES_AMB_THREADS")}
 
 
 def _finite_or_none(obj: Any) -> Any:
