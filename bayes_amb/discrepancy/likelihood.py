@@ -103,6 +103,16 @@ class RobustWhittle(WhittleLikelihood):
             filt = lfilter(self.prefilter, [1.0], resp, axis=0)
             self.lines.append(np.fft.rfft(filt / self.scale, axis=0)[self.k])  # (nf, 4, 2)
 
+    def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
+        """The spectral-line bases (nf, 4, 2 per line candidate) and their coefficients."""
+        fwd: ExtendedForwardModel = self.forward  # type: ignore[assignment]
+        if not self.lines:
+            return None, None
+        P = np.atleast_2d(theta)
+        coef = np.hstack([P[:, fwd.slices[fwd.candidates.index(c)]]
+                          for c in fwd.line_candidates])
+        return np.concatenate(self.lines, axis=2), coef
+
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         P = np.atleast_2d(theta)
         mb, xi = self.forward.modal(P, self.x_w)
@@ -116,8 +126,7 @@ class RobustWhittle(WhittleLikelihood):
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         theta = np.atleast_2d(theta)
         ls = np.atleast_2d(log10_sigma)
-        R, stable = self.residual_dft(theta)
-        Pb = self._band_sums(R)
+        Pb, stable = self.band_sums(theta)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
         Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
