@@ -41,6 +41,13 @@ class LikelihoodBench(Result):
         Parameters, samples per channel (4 channels), vectors per fast call, timed calls.
     residual_rel_err : float
         Largest relative difference between the two residual DFTs at the truth.
+    numpy_path_us : float
+        The same evaluation on the numpy path (``BAYES_AMB_KERNEL=numpy``, the path before
+        the compiled kernel), timed interleaved with likelihood_us.
+    kernel_speedup : float
+        numpy_path_us / likelihood_us.
+    kernel_rel_err : float
+        Largest relative difference between the two paths' log posteriors.
     """
 
     likelihood_us: float
@@ -51,6 +58,9 @@ class LikelihoodBench(Result):
     batch: int
     repeats: int
     residual_rel_err: float
+    numpy_path_us: float
+    kernel_speedup: float
+    kernel_rel_err: float
 
 
 @dataclass(frozen=True)

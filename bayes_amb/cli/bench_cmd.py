@@ -88,7 +88,10 @@ def _details(d: dict[str, Any]) -> list[str]:
         r = d["likelihood"]
         out.append(f"likelihood: {r['n_params']} parameters, {r['n_samples']} samples x 4, "
                    f"batch {r['batch']}; baseline forced_response + iid Gaussian; residual "
-                   f"DFT check {r['residual_rel_err']:.1e}")
+                   f"DFT check {r['residual_rel_err']:.1e}; numpy path (BAYES_AMB_KERNEL="
+                   f"numpy) {_us(r['numpy_path_us'])}/eval, the compiled kernel "
+                   f"{r['kernel_speedup']:.2f}x faster (log posterior check "
+                   f"{r['kernel_rel_err']:.1e})")
     if "posterior" in d:
         r = d["posterior"]
         out.append(f"posterior: {r['n_params']} parameters, {r['n_samples']} samples, "

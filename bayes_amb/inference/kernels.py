@@ -45,38 +45,54 @@ def use_compiled() -> bool:
 @njit(cache=True, nogil=True)
 def _residual_band_sums(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts,
                         out):  # pragma: no cover - compiled
+    # complex products written out in real arithmetic and 1/(z - lam) as conj / |.|^2 (as
+    # dft_response does): numba's complex division and per-band temporaries cost 10x
     nb, ns = lam.shape
     m = X.shape[1]
     p = E.shape[1]
     nl = coef.shape[1]
-    u = np.empty(ns, dtype=np.complex128)
-    r = np.empty(p, dtype=np.complex128)
+    ur, ui = np.empty(ns), np.empty(ns)
+    rr, ri = np.empty(p), np.empty(p)
+    accr, acci = np.empty((p, p)), np.empty((p, p))
     for b in range(nb):
         for band in range(starts.size):
-            acc = np.zeros((p, p), dtype=np.complex128)
+            accr[:] = 0.0
+            acci[:] = 0.0
             for k in range(starts[band], starts[band] + counts[band]):
-                zk = z[k]
+                zr, zi = z[k].real, z[k].imag
                 for s in range(ns):
                     v = X[k, 0] * Bm[b, s, 0]
                     for c in range(1, m):
                         v += X[k, c] * Bm[b, s, c]
-                    u[s] = (v - zk * xi[b, s]) / (zk - lam[b, s])
+                    v -= z[k] * xi[b, s]
+                    dr = zr - lam[b, s].real
+                    di = zi - lam[b, s].imag
+                    d = 1.0 / (dr * dr + di * di)
+                    ur[s] = (v.real * dr + v.imag * di) * d
+                    ui[s] = (v.imag * dr - v.real * di) * d
                 for i in range(p):
-                    y = Cm[b, i, 0] * u[0]
-                    for s in range(1, ns):
-                        y += Cm[b, i, s] * u[s]
-                    ri = E[k, i] - y * inv_scale
+                    yr = 0.0
+                    yi = 0.0
+                    for s in range(ns):
+                        cr, ci = Cm[b, i, s].real, Cm[b, i, s].imag
+                        yr += cr * ur[s] - ci * ui[s]
+                        yi += cr * ui[s] + ci * ur[s]
+                    er = E[k, i].real - yr * inv_scale
+                    ei = E[k, i].imag - yi * inv_scale
                     for j in range(nl):
-                        ri -= lines[k, i, j] * coef[b, j]
-                    r[i] = ri
+                        er -= lines[k, i, j].real * coef[b, j]
+                        ei -= lines[k, i, j].imag * coef[b, j]
+                    rr[i] = er
+                    ri[i] = ei
                 for i in range(p):
                     for j in range(i, p):
-                        acc[i, j] += r[i] * np.conj(r[j])
+                        accr[i, j] += rr[i] * rr[j] + ri[i] * ri[j]
+                        acci[i, j] += ri[i] * rr[j] - rr[i] * ri[j]
             for i in range(p):
-                out[b, band, i, i] = acc[i, i]
+                out[b, band, i, i] = accr[i, i]
                 for j in range(i + 1, p):
-                    out[b, band, i, j] = acc[i, j]
-                    out[b, band, j, i] = np.conj(acc[i, j])
+                    out[b, band, i, j] = accr[i, j] + 1j * acci[i, j]
+                    out[b, band, j, i] = accr[i, j] - 1j * acci[i, j]
 
 
 def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray,
@@ -127,9 +143,10 @@ def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: N
 
 @njit(cache=True, nogil=True)
 def _logdet_and_trace(Phi, P, logdet, quad, ok):  # pragma: no cover - compiled
+    # Cholesky Phi = L L^H, M = L^-1, tr(M P M^H), in real arithmetic (see above)
     nb, nbands, n, _ = Phi.shape
-    L = np.zeros((n, n), dtype=np.complex128)
-    M = np.zeros((n, n), dtype=np.complex128)
+    Lr, Li = np.zeros((n, n)), np.zeros((n, n))
+    Mr, Mi = np.zeros((n, n)), np.zeros((n, n))
     for b in range(nb):
         for band in range(nbands):
             good = True
@@ -137,32 +154,44 @@ def _logdet_and_trace(Phi, P, logdet, quad, ok):  # pragma: no cover - compiled
             for j in range(n):
                 s = Phi[b, band, j, j].real
                 for k in range(j):
-                    s -= L[j, k].real ** 2 + L[j, k].imag ** 2
+                    s -= Lr[j, k] * Lr[j, k] + Li[j, k] * Li[j, k]
                 if not s > 0:
                     good = False
                     s = 1.0
                 d = np.sqrt(s)
                 ld += 2 * np.log(d)
-                L[j, j] = d
+                Lr[j, j] = d
+                Li[j, j] = 0.0
                 for i in range(j + 1, n):
-                    acc = Phi[b, band, i, j]
-                    for k in range(j):
-                        acc -= L[i, k] * np.conj(L[j, k])
-                    L[i, j] = acc / d
+                    ar = Phi[b, band, i, j].real
+                    ai = Phi[b, band, i, j].imag
+                    for k in range(j):           # - L_ik conj(L_jk)
+                        ar -= Lr[i, k] * Lr[j, k] + Li[i, k] * Li[j, k]
+                        ai -= Li[i, k] * Lr[j, k] - Lr[i, k] * Li[j, k]
+                    Lr[i, j] = ar / d
+                    Li[i, j] = ai / d
             for i in range(n):
-                M[i, i] = 1.0 / L[i, i]
+                Mr[i, i] = 1.0 / Lr[i, i]
+                Mi[i, i] = 0.0
                 for j in range(i):
-                    acc = L[i, j] * M[j, j]
-                    for k in range(j + 1, i):
-                        acc += L[i, k] * M[k, j]
-                    M[i, j] = -acc / L[i, i]
+                    ar = Lr[i, j] * Mr[j, j]
+                    ai = Li[i, j] * Mr[j, j]
+                    for k in range(j + 1, i):    # + L_ik M_kj
+                        ar += Lr[i, k] * Mr[k, j] - Li[i, k] * Mi[k, j]
+                        ai += Lr[i, k] * Mi[k, j] + Li[i, k] * Mr[k, j]
+                    Mr[i, j] = -ar / Lr[i, i]
+                    Mi[i, j] = -ai / Lr[i, i]
             q = 0.0
             for i in range(n):
                 for k in range(i + 1):
-                    v = M[i, 0] * P[b, band, 0, k]
-                    for j in range(1, i + 1):
-                        v += M[i, j] * P[b, band, j, k]
-                    q += (v * np.conj(M[i, k])).real
+                    vr = 0.0
+                    vi = 0.0
+                    for j in range(i + 1):       # v = sum_j M_ij P_jk
+                        pr = P[b, band, j, k].real
+                        pi = P[b, band, j, k].imag
+                        vr += Mr[i, j] * pr - Mi[i, j] * pi
+                        vi += Mr[i, j] * pi + Mi[i, j] * pr
+                    q += vr * Mr[i, k] + vi * Mi[i, k]    # Re(v conj(M_ik))
             logdet[b, band] = ld
             quad[b, band] = q
             ok[b, band] = good
