@@ -23,6 +23,7 @@ parallelism is the batch over walkers and the tool's own worker pools). Set
 
 from __future__ import annotations
 
+import itertools
 import os
 
 import numpy as np
@@ -42,57 +43,98 @@ def use_compiled() -> bool:
     return value == "numba"
 
 
+CHUNK_BINS = 512
+"""Bins per pass of the kernel (whole bands; a band wider than this is one pass): the
+modal responses of a pass, 2 x ns x CHUNK_BINS doubles, stay in the L2 cache."""
+
+
 @njit(cache=True, nogil=True)
-def _residual_band_sums(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts,
-                        out):  # pragma: no cover - compiled
-    # complex products written out in real arithmetic and 1/(z - lam) as conj / |.|^2 (as
-    # dft_response does): numba's complex division and per-band temporaries cost 10x
+def _residual_band_sums(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, Li, coef,
+                        starts, counts, chunks, width, out):  # pragma: no cover - compiled
+    # Real arithmetic on (channel, bin) rows, so that the loops over bins are unit-stride
+    # and vectorise (numba's complex division and per-bin temporaries cost 10x); bins are
+    # taken a few hundred at a time (whole bands) so that u stays in cache.
     nb, ns = lam.shape
-    m = X.shape[1]
-    p = E.shape[1]
+    m = Xr.shape[0]
+    p = Er.shape[0]
     nl = coef.shape[1]
-    ur, ui = np.empty(ns), np.empty(ns)
-    rr, ri = np.empty(p), np.empty(p)
-    accr, acci = np.empty((p, p)), np.empty((p, p))
+    ur, ui = np.empty((ns, width)), np.empty((ns, width))
+    rr, ri = np.empty((p, width)), np.empty((p, width))
     for b in range(nb):
-        for band in range(starts.size):
-            accr[:] = 0.0
-            acci[:] = 0.0
-            for k in range(starts[band], starts[band] + counts[band]):
-                zr, zi = z[k].real, z[k].imag
-                for s in range(ns):
-                    v = X[k, 0] * Bm[b, s, 0]
-                    for c in range(1, m):
-                        v += X[k, c] * Bm[b, s, c]
-                    v -= z[k] * xi[b, s]
-                    dr = zr - lam[b, s].real
-                    di = zi - lam[b, s].imag
+        for q in range(chunks.size - 1):
+            b0, b1 = chunks[q], chunks[q + 1]
+            k0 = starts[b0]
+            n = starts[b1 - 1] + counts[b1 - 1] - k0
+            for s in range(ns):                 # u_s = (Bm_s . X_k - z_k xi_s) / (z_k - lam_s)
+                lr, li = lam[b, s].real, lam[b, s].imag
+                xr, xi_ = xi[b, s].real, xi[b, s].imag
+                urs, uis = ur[s], ui[s]
+                for k in range(n):
+                    urs[k] = -(zr[k0 + k] * xr - zi[k0 + k] * xi_)
+                    uis[k] = -(zr[k0 + k] * xi_ + zi[k0 + k] * xr)
+                for c in range(m):
+                    br, bi = Bm[b, s, c].real, Bm[b, s, c].imag
+                    xrc, xic = Xr[c], Xi[c]
+                    for k in range(n):
+                        urs[k] += xrc[k0 + k] * br - xic[k0 + k] * bi
+                        uis[k] += xrc[k0 + k] * bi + xic[k0 + k] * br
+                for k in range(n):                # times conj(z - lam) / |z - lam|^2
+                    dr = zr[k0 + k] - lr
+                    di = zi[k0 + k] - li
                     d = 1.0 / (dr * dr + di * di)
-                    ur[s] = (v.real * dr + v.imag * di) * d
-                    ui[s] = (v.imag * dr - v.real * di) * d
-                for i in range(p):
-                    yr = 0.0
-                    yi = 0.0
-                    for s in range(ns):
-                        cr, ci = Cm[b, i, s].real, Cm[b, i, s].imag
-                        yr += cr * ur[s] - ci * ui[s]
-                        yi += cr * ui[s] + ci * ur[s]
-                    er = E[k, i].real - yr * inv_scale
-                    ei = E[k, i].imag - yi * inv_scale
-                    for j in range(nl):
-                        er -= lines[k, i, j].real * coef[b, j]
-                        ei -= lines[k, i, j].imag * coef[b, j]
-                    rr[i] = er
-                    ri[i] = ei
+                    a, e = urs[k], uis[k]
+                    urs[k] = (a * dr + e * di) * d
+                    uis[k] = (e * dr - a * di) * d
+            for i in range(p):                  # R = E - (Cm u) / scale - lines . coef
+                rri, rii = rr[i], ri[i]
+                for k in range(n):
+                    rri[k] = 0.0
+                    rii[k] = 0.0
+                for s in range(ns):
+                    cr, ci = Cm[b, i, s].real * inv_scale, Cm[b, i, s].imag * inv_scale
+                    urs, uis = ur[s], ui[s]
+                    for k in range(n):
+                        rri[k] += cr * urs[k] - ci * uis[k]
+                        rii[k] += cr * uis[k] + ci * urs[k]
+                eri, eii = Er[i], Ei[i]
+                for k in range(n):
+                    rri[k] = eri[k0 + k] - rri[k]
+                    rii[k] = eii[k0 + k] - rii[k]
+                for j in range(nl):
+                    g = coef[b, j]
+                    lrj, lij = Lr[j, i], Li[j, i]
+                    for k in range(n):
+                        rri[k] -= lrj[k0 + k] * g
+                        rii[k] -= lij[k0 + k] * g
+            for band in range(b0, b1):          # P_b = sum_k R_k R_k^H
+                lo = starts[band] - k0
+                hi = lo + counts[band]
                 for i in range(p):
                     for j in range(i, p):
-                        accr[i, j] += rr[i] * rr[j] + ri[i] * ri[j]
-                        acci[i, j] += ri[i] * rr[j] - rr[i] * ri[j]
-            for i in range(p):
-                out[b, band, i, i] = accr[i, i]
-                for j in range(i + 1, p):
-                    out[b, band, i, j] = accr[i, j] + 1j * acci[i, j]
-                    out[b, band, j, i] = accr[i, j] - 1j * acci[i, j]
+                        ar = 0.0
+                        ai = 0.0
+                        for k in range(lo, hi):
+                            ar += rr[i, k] * rr[j, k] + ri[i, k] * ri[j, k]
+                            ai += ri[i, k] * rr[j, k] - rr[i, k] * ri[j, k]
+                        out[b, band, i, j] = ar + 1j * ai
+                        if j > i:
+                            out[b, band, j, i] = ar - 1j * ai
+
+
+def _chunks(counts: NDArray, width: int) -> tuple[NDArray, int]:
+    """Band indices where each pass of the kernel starts (and the end), and the widest
+    pass in bins: consecutive whole bands of at most width bins (or one wider band)."""
+    edges = [0]
+    acc = 0
+    for band, c in enumerate(counts):
+        if acc and acc + c > width:
+            edges.append(band)
+            acc = 0
+        acc += int(c)
+    edges.append(counts.size)
+    e = np.asarray(edges, dtype=np.int64)
+    widest = max(int(counts[a:b].sum()) for a, b in itertools.pairwise(e))
+    return e, widest
 
 
 def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray,
@@ -126,18 +168,24 @@ def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: N
     nb = lam.shape[0]
     p = E.shape[1]
     if lines is None or coef is None or coef.shape[1] == 0:
-        lines = np.zeros((1, p, 0), dtype=complex)
+        lines = np.zeros((E.shape[0], p, 0), dtype=complex)
         coef = np.zeros((nb, 0))
     out = np.empty((nb, starts.size, p, p), dtype=complex)
-    c128 = np.complex128
+    chunks, width = _chunks(np.asarray(counts), CHUNK_BINS)
+    c128, f64, i64 = np.complex128, np.float64, np.int64
+    X = np.asarray(X, dtype=c128)
+    z = np.asarray(z, dtype=c128)
+    E = np.asarray(E, dtype=c128)
+    L = np.asarray(lines, dtype=c128).transpose(2, 1, 0)              # (nl, p, nf)
     _residual_band_sums(np.ascontiguousarray(lam, c128), np.ascontiguousarray(Bm, c128),
                         np.ascontiguousarray(Cm, c128), np.ascontiguousarray(xi, c128),
-                        np.ascontiguousarray(X, c128), np.ascontiguousarray(z, c128),
-                        np.ascontiguousarray(E, c128), 1.0 / scale,
-                        np.ascontiguousarray(lines, c128),
-                        np.ascontiguousarray(coef, np.float64),
-                        np.ascontiguousarray(starts, np.int64),
-                        np.ascontiguousarray(counts, np.int64), out)
+                        np.ascontiguousarray(X.real.T), np.ascontiguousarray(X.imag.T),
+                        np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag),
+                        np.ascontiguousarray(E.real.T), np.ascontiguousarray(E.imag.T),
+                        1.0 / scale, np.ascontiguousarray(L.real),
+                        np.ascontiguousarray(L.imag), np.ascontiguousarray(coef, f64),
+                        np.ascontiguousarray(starts, i64), np.ascontiguousarray(counts, i64),
+                        chunks, width, out)
     return out
 
 
