@@ -78,7 +78,9 @@ def _majorant(like, P):
     return np.add.reduceat(outer, like.starts, axis=1), n_ops
 
 
-def test_band_sums_equal_the_numpy_path(rec):
+@pytest.mark.parametrize("width", [512, 7])     # one pass; many, some bands wider than 7
+def test_band_sums_equal_the_numpy_path(rec, width, monkeypatch):
+    monkeypatch.setattr(kernels, "CHUNK_BINS", width)
     rng = np.random.default_rng(0)
     for like, p in _likelihoods(rec):
         P = _batch(p, rng)
@@ -150,3 +152,11 @@ def test_kernel_choice_is_validated(monkeypatch):
     monkeypatch.setenv(kernels.KERNEL_ENV, "fortran")
     with pytest.raises(Exception, match="BAYES_AMB_KERNEL: expected 'numba' or 'numpy'"):
         kernels.use_compiled()
+
+
+def test_passes_cover_whole_bands_in_order():
+    counts = np.array([1, 1, 1, 5, 9, 2, 30, 3, 3])
+    edges, widest = kernels._chunks(counts, 8)
+    assert edges[0] == 0 and edges[-1] == counts.size and np.all(np.diff(edges) > 0)
+    sizes = [int(counts[a:b].sum()) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    assert sizes == [8, 9, 2, 30, 6] and widest == 30
