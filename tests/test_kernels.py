@@ -11,6 +11,8 @@ A wrong term, sign or band boundary gives differences of order one against these
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
 import pytest
 
@@ -158,5 +160,5 @@ def test_passes_cover_whole_bands_in_order():
     counts = np.array([1, 1, 1, 5, 9, 2, 30, 3, 3])
     edges, widest = kernels._chunks(counts, 8)
     assert edges[0] == 0 and edges[-1] == counts.size and np.all(np.diff(edges) > 0)
-    sizes = [int(counts[a:b].sum()) for a, b in zip(edges[:-1], edges[1:], strict=True)]
+    sizes = [int(counts[a:b].sum()) for a, b in itertools.pairwise(edges)]
     assert sizes == [8, 9, 2, 30, 6] and widest == 30
