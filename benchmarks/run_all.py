@@ -1,6 +1,6 @@
 """Run the benchmarks and write benchmarks/results/latest.json (atomically).
 
-    OPENBLAS_NUM_THREADS=1 .venv/bin/python benchmarks/run_all.py [--quick] [--only NAME,...]
+    .venv/bin/python benchmarks/run_all.py [--quick] [--only NAME,...]
 
 A thin wrapper around bayes_amb.bench: the same figures as ``bayes-amb bench --json``, plus
 the git commit they were measured at, printed as the table and saved for comparison.

@@ -20,7 +20,8 @@ from bayes_amb.cli.main import main
 
 KEYS = {
     "likelihood": {"likelihood_us", "baseline_us", "speedup", "n_params", "n_samples",
-                   "batch", "repeats", "residual_rel_err"},
+                   "batch", "repeats", "residual_rel_err", "numpy_path_us",
+                   "kernel_speedup", "kernel_rel_err"},
     "posterior": {"posterior_s", "wall_s", "ess_per_s", "converged", "max_r_hat", "min_ess",
                   "n_tau", "likelihood_evals", "baseline_eval_us",
                   "baseline_posterior_s_estimated", "speedup_estimated", "parameters"},
@@ -28,7 +29,7 @@ KEYS = {
                  "requirement_s", "max_rel_diff"},
     "map": {"lbfgs", "nelder_mead", "speedup", "eval_ratio"},
 }
-TIMES = {"likelihood": ("likelihood_us", "baseline_us"),
+TIMES = {"likelihood": ("likelihood_us", "baseline_us", "numpy_path_us"),
          "posterior": ("posterior_s", "wall_s", "baseline_posterior_s_estimated"),
          "simulate": ("simulate_s", "baseline_s")}
 

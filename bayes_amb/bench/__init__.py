@@ -14,6 +14,7 @@ from bayes_amb.bench.baselines import (
 from bayes_amb.bench.cases import (
     BENCHMARKS,
     DEFAULT_BENCHMARKS,
+    bench_cli,
     bench_likelihood,
     bench_map,
     bench_posterior,
@@ -35,8 +36,8 @@ from bayes_amb.bench.results import (
 )
 
 __all__ = ["BENCHMARKS", "DEFAULT_BENCHMARKS", "BenchmarkError", "LikelihoodBench", "MapBench",
-           "MapRun",
-           "ParamRecovery", "PosteriorBench", "Result", "SimulateBench", "bench_likelihood",
-           "bench_map", "bench_posterior", "bench_simulate", "closed_loop_ss", "environment",
+           "MapRun", "ParamRecovery", "PosteriorBench", "Result", "SimulateBench", "bench_cli",
+           "bench_likelihood", "bench_map", "bench_posterior", "bench_simulate", "closed_loop_ss",
+           "environment",
            "make_recording", "median_time", "naive_eval_us", "naive_log_likelihood",
            "report", "run_benchmarks"]

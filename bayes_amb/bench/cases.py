@@ -47,6 +47,7 @@ from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, build_truth, simulate_recording
+from bayes_amb.threads import limited_threads
 
 log = logging.getLogger(__name__)
 
@@ -106,7 +107,9 @@ def bench_likelihood(quick: bool = False, batch: int = 32) -> LikelihoodBench:
     :func:`~bayes_amb.bench.baselines.naive_log_likelihood`, one vector per call. Before
     timing, the DFT of the forced_response residual at the truth (through the likelihood's
     prewhitening FIR) is checked against the fast path's residual DFT (relative difference
-    below CHECK_RTOL).
+    below CHECK_RTOL). The compiled kernel is also timed against the numpy path it replaced
+    (``BAYES_AMB_KERNEL=numpy``), interleaved call by call, and both must give the same log
+    posterior to CHECK_RTOL.
 
     Parameters
     ----------
@@ -133,12 +136,48 @@ def bench_likelihood(quick: bool = False, batch: int = 32) -> LikelihoodBench:
                              f"forced_response residual by {err:.2e}; expected < {CHECK_RTOL}")
     points = _ball(theta, batch, np.random.default_rng(0))
     repeats = 3 if quick else 15
-    fast_us = 1e6 * median_time(lambda: post(points), repeats) / batch
+    fast_us, numpy_us, kernel_err = _kernel_side_by_side(post, points, repeats)
     base_us = naive_eval_us(fm, eps, points, 3 if quick else 9)
     return LikelihoodBench(likelihood_us=fast_us, baseline_us=base_us,
                            speedup=base_us / fast_us, n_params=len(PARAMS_8),
                            n_samples=rec.n_samples, batch=batch, repeats=repeats,
-                           residual_rel_err=err)
+                           residual_rel_err=err, numpy_path_us=numpy_us,
+                           kernel_speedup=numpy_us / fast_us, kernel_rel_err=kernel_err)
+
+
+def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
+                         ) -> tuple[float, float, float]:
+    """Per-evaluation time (us) of the posterior with the compiled kernel and with the numpy
+    path (BAYES_AMB_KERNEL=numpy, the path before issue 16), interleaved call by call after
+    a warm-up of each; and the largest relative difference of their log posteriors."""
+    import os
+
+    from bayes_amb.inference.kernels import KERNEL_ENV
+
+    saved = os.environ.get(KERNEL_ENV)
+    times: dict[str, list[float]] = {"numba": [], "numpy": []}
+    values = {}
+    try:
+        for r in range(repeats + 1):
+            for kind in ("numba", "numpy") if r % 2 else ("numpy", "numba"):
+                os.environ[KERNEL_ENV] = kind
+                t0 = time.perf_counter()
+                values[kind] = post(points)
+                if r:
+                    times[kind].append(time.perf_counter() - t0)
+    finally:
+        if saved is None:
+            os.environ.pop(KERNEL_ENV, None)
+        else:
+            os.environ[KERNEL_ENV] = saved
+    rel = float(np.max(np.abs(values["numba"] - values["numpy"]) / np.abs(values["numpy"])))
+    if not rel < CHECK_RTOL:
+        raise BenchmarkError(f"likelihood benchmark: the compiled kernel's log posterior "
+                             f"differs from the numpy path's by {rel:.2e}; expected < "
+                             f"{CHECK_RTOL}")
+    n = points.shape[0]
+    return (1e6 * float(np.median(times["numba"])) / n,
+            1e6 * float(np.median(times["numpy"])) / n, rel)
 
 
 def bench_posterior(quick: bool = False) -> PosteriorBench:
@@ -259,6 +298,14 @@ def bench_map(quick: bool = False) -> MapBench:
                     eval_ratio=nm.n_evals / lb.n_evals)
 
 
+def bench_cli(quick: bool = False) -> Result:
+    """The README's paper case through the CLI in subprocesses, with and without
+    OPENBLAS_NUM_THREADS=1 (bayes_amb.bench.cli_case)."""
+    from bayes_amb.bench.cli_case import bench_cli as run
+
+    return run(quick)
+
+
 def bench_study(quick: bool = False) -> Result:
     """Study throughput (bayes_amb.bench.study_case): the 1000-replicate MAP + Laplace
     noise sweep of the paper's case through run_study on 2 workers (quick: 20)."""
@@ -269,16 +316,18 @@ def bench_study(quick: bool = False) -> Result:
 
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
-    "simulate": bench_simulate, "map": bench_map, "study": bench_study}
+    "simulate": bench_simulate, "map": bench_map, "cli": bench_cli, "study": bench_study}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
-"""What ``bayes-amb bench`` runs without --only (the study sweep takes minutes: ask for it
-with --only study)."""
+"""What ``bayes-amb bench`` runs without --only (the CLI runs and the study sweep take
+minutes: ask for them with --only cli, --only study)."""
 
 
+@limited_threads
 def run_benchmarks(names: list[str] | tuple[str, ...] | None = None, quick: bool = False
                    ) -> dict[str, Result]:
-    """Run the named benchmarks in BENCHMARKS order.
+    """Run the named benchmarks in BENCHMARKS order, BLAS threads limited as the CLI does
+    (bayes_amb.threads).
 
     Parameters
     ----------

@@ -41,6 +41,13 @@ class LikelihoodBench(Result):
         Parameters, samples per channel (4 channels), vectors per fast call, timed calls.
     residual_rel_err : float
         Largest relative difference between the two residual DFTs at the truth.
+    numpy_path_us : float
+        The same evaluation on the numpy path (``BAYES_AMB_KERNEL=numpy``, the path before
+        the compiled kernel), timed interleaved with likelihood_us.
+    kernel_speedup : float
+        numpy_path_us / likelihood_us.
+    kernel_rel_err : float
+        Largest relative difference between the two paths' log posteriors.
     """
 
     likelihood_us: float
@@ -51,6 +58,9 @@ class LikelihoodBench(Result):
     batch: int
     repeats: int
     residual_rel_err: float
+    numpy_path_us: float
+    kernel_speedup: float
+    kernel_rel_err: float
 
 
 @dataclass(frozen=True)
@@ -168,7 +178,8 @@ def environment() -> dict[str, Any]:
     -------
     dict
         Versions of bayes_amb, Python, numpy, scipy and python-control, the machine, the
-        CPU count and OPENBLAS_NUM_THREADS / OMP_NUM_THREADS (None when unset).
+        CPU count and OPENBLAS_NUM_THREADS / OMP_NUM_THREADS / BAYES_AMB_THREADS (None
+        when unset).
     """
     import control
     import scipy
@@ -178,7 +189,8 @@ def environment() -> dict[str, Any]:
             "numpy": np.__version__, "scipy": scipy.__version__, "control": control.__version__,
             "machine": platform.machine(), "cpu_count": os.cpu_count(),
             "OPENBLAS_NUM_THREADS": os.environ.get("OPENBLAS_NUM_THREADS"),
-            "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS")}
+            "OMP_NUM_THREADS": os.environ.get("OMP_NUM_THREADS"),
+            "BAYES_AMB_THREADS": os.environ.get("BAYES_AMB_THREADS")}
 
 
 def _finite_or_none(obj: Any) -> Any:

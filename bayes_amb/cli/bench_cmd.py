@@ -17,11 +17,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "process and print both and the ratio (speedup = baseline / ours). "
                        "Benchmarks: " + ", ".join(BENCHMARKS) + ". The default set ("
                        + ", ".join(DEFAULT_BENCHMARKS) + ") takes about 1.5 minutes; "
-                       "'--only study' (1000-replicate study throughput) about 5. Set "
-                       "OPENBLAS_NUM_THREADS=1 for comparable figures.")
+                       "'--only cli' (a README command in subprocesses with and without "
+                       "OPENBLAS_NUM_THREADS=1) about 2; '--only study' (1000-replicate study "
+                       "throughput) about 5. BLAS threads are limited by the tool itself "
+                       "(--threads, BAYES_AMB_THREADS).")
     p.add_argument("--only", default=None, metavar="NAME,...",
                    help="comma-separated benchmarks to run, of " + ", ".join(BENCHMARKS)
-                   + " (default: all but study)")
+                   + " (default: all but cli, study)")
     p.add_argument("--quick", action="store_true",
                    help="smoke-test sizes (seconds; the figures are not representative; "
                    "default: full sizes)")
@@ -70,6 +72,10 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         rows.append(("map", f"{lb['wall_s']:.2f} s, {lb['n_evals']} evals",
                      f"{nm['wall_s']:.2f} s, {nm['n_evals']} evals",
                      f"{d['map']['speedup']:.1f}x"))
+    if "cli" in d:
+        r = d["cli"]
+        rows.append(("cli", f"{r['default_s']:.1f} s without the variable",
+                     f"{r['variable_s']:.1f} s with it", f"{r['ratio']:.2f}"))
     if "study" in d:
         r = d["study"]
         rows.append(("study", f"{r['n_replicates']} replicates in {r['wall_s']:.0f} s "
@@ -84,7 +90,10 @@ def _details(d: dict[str, Any]) -> list[str]:
         r = d["likelihood"]
         out.append(f"likelihood: {r['n_params']} parameters, {r['n_samples']} samples x 4, "
                    f"batch {r['batch']}; baseline forced_response + iid Gaussian; residual "
-                   f"DFT check {r['residual_rel_err']:.1e}")
+                   f"DFT check {r['residual_rel_err']:.1e}; numpy path (BAYES_AMB_KERNEL="
+                   f"numpy) {_us(r['numpy_path_us'])}/eval, the compiled kernel "
+                   f"{r['kernel_speedup']:.2f}x faster (log posterior check "
+                   f"{r['kernel_rel_err']:.1e})")
     if "posterior" in d:
         r = d["posterior"]
         out.append(f"posterior: {r['n_params']} parameters, {r['n_samples']} samples, "
@@ -111,6 +120,14 @@ def _details(d: dict[str, Any]) -> list[str]:
         out.append("map: paper's case (k_By = 0.5); " + "; ".join(
             f"{v['method']} theta {v['theta']:.6f} (error {v['abs_error']:.1e}, log post "
             f"{v['log_post']:.1f})" for v in (m["lbfgs"], m["nelder_mead"])))
+    if "cli" in d:
+        r = d["cli"]
+        out.append(f"cli: `{r['command']}`, {r['repeats']} runs per environment, interleaved;"
+                   f" ratio = without / with OPENBLAS_NUM_THREADS=1 (target <= "
+                   f"{r['target_ratio']:g}); with BAYES_AMB_THREADS=0 (no protection, as "
+                   f"before issue 16) {r['unprotected_s']:.1f} s = {r['unprotected_ratio']:.2f}"
+                   f"x; runs " + ", ".join(f"{k} " + "/".join(f"{t:.1f}" for t in v)
+                                           for k, v in r["runs_s"].items()))
     return out
 
 
@@ -118,7 +135,8 @@ def format_text(d: dict[str, Any]) -> str:
     """The human-readable table of a `bench --json` dict."""
     env = d["environment"]
     head = (f"bayes-amb bench{' --quick' if d['quick'] else ''}: speedup = baseline / ours "
-            f"(OPENBLAS_NUM_THREADS={env['OPENBLAS_NUM_THREADS']}, {env['cpu_count']} CPUs)")
+            f"(OPENBLAS_NUM_THREADS={env['OPENBLAS_NUM_THREADS']}, BAYES_AMB_THREADS="
+            f"{env.get('BAYES_AMB_THREADS')}, {env['cpu_count']} CPUs)")
     rows = [("benchmark", "ours", "baseline", "speedup"), *_rows(d)]
     w = [max(len(r[i]) for r in rows) for i in range(4)]
     lines = [head, ""] + [f"{a:<{w[0]}}  {b:<{w[1]}}  {c:<{w[2]}}  {s:>{w[3]}}"

@@ -13,6 +13,8 @@ import sys
 
 from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.threads import ENV_VAR as THREADS_ENV
+from bayes_amb.threads import configure_process
 
 _NEGATIVE_NUMBER = re.compile(r"^-(\d[\d_]*\.?\d*|\.\d+)([eE][-+]?\d+)?$|^-(inf|infinity|nan)$",
                               re.IGNORECASE)
@@ -40,6 +42,8 @@ def build_parser() -> argparse.ArgumentParser:
                             "identification of rotors on active magnetic bearings.")
     parser.add_argument("--version", action="version", version=f"bayes-amb {__version__}")
     parser.add_argument("-v", "--verbose", action="store_true", help="log progress details")
+    parser.add_argument("--threads", metavar="N", help="BLAS/OpenMP threads (default: "
+                        f"${THREADS_ENV} or 1; 0 keeps the libraries' own default)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_OneLineParser)
     for mod in (model_cmd, params_cmd):
         mod.add_parser(sub)
@@ -62,7 +66,24 @@ def _add_optional_commands(sub: argparse._SubParsersAction) -> None:
         mod.add_parser(sub)
 
 
+def _threads_option(argv: list[str]) -> str | None:
+    """The value of a global --threads N / --threads=N, read before anything imports numpy."""
+    for i, arg in enumerate(argv):
+        if arg == "--threads" and i + 1 < len(argv):
+            return argv[i + 1]
+        if arg.startswith("--threads="):
+            return arg.partition("=")[2]
+        if not arg.startswith("-"):
+            return None                       # the command: global options come before it
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
+    try:                                      # before the heavy imports (BLAS reads its env)
+        configure_process(_threads_option(sys.argv[1:] if argv is None else argv))
+    except BayesAmbError as exc:
+        sys.stderr.write(f"bayes-amb: error: {exc}\n")
+        return 2
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

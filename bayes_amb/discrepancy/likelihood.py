@@ -51,7 +51,7 @@ from scipy.signal import lfilter
 from scipy.special import gammaln
 
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference.forward import dft_response, final_modal_state
+from bayes_amb.inference.forward import ModalBatch, dft_response, final_modal_state
 from bayes_amb.inference.whittle import WhittleLikelihood
 
 P_CH = 4
@@ -102,13 +102,19 @@ class RobustWhittle(WhittleLikelihood):
         self.X = np.fft.rfft(x_w[self.start:], axis=0)[self.k]
         self.w_gain2 = np.abs(np.polyval(w[::-1], 1.0 / self.z)) ** 2
 
-    def prediction_dft(self, P: NDArray) -> tuple[NDArray, NDArray]:
-        """DFT of S(theta) x over the window (scaled), and the stability mask, for a batch
-        of parameter rows P (nb, p + q); lines not included."""
-        mb, xi = self.forward.modal(P, self.x_w)
+    def modal_state(self, theta: NDArray) -> tuple[ModalBatch, NDArray]:
+        """As in WhittleLikelihood, with the state at the window start (driven by the
+        pre-history from rest) subtracted: xi = s_N - s_start (module docstring)."""
+        mb, xi = self.forward.modal(theta, self.x_w)
         if self.start:
             lam_s = np.where(mb.stable[:, None], mb.lam, 0.0)
             xi = xi - final_modal_state(lam_s, mb.Bm, self.x_pre)
+        return mb, xi
+
+    def prediction_dft(self, P: NDArray) -> tuple[NDArray, NDArray]:
+        """DFT of S(theta) x over the window (scaled), and the stability mask, for a batch
+        of parameter rows P (nb, p + q); lines not included."""
+        mb, xi = self.modal_state(P)
         return dft_response(mb, self.X, self.z, xi) / self.scale, mb.stable
 
     def for_model(self, forward: ExtendedForwardModel, theta_ref: NDArray) -> RobustWhittle:
@@ -140,6 +146,16 @@ class RobustWhittle(WhittleLikelihood):
             self.lines.append(np.fft.rfft(filt[self.start:] / self.scale,
                                           axis=0)[self.k])                   # (nf, 4, 2)
 
+    def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
+        """The spectral-line bases (nf, 4, 2 per line candidate) and their coefficients."""
+        fwd: ExtendedForwardModel = self.forward  # type: ignore[assignment]
+        if not self.lines:
+            return None, None
+        P = np.atleast_2d(theta)
+        coef = np.hstack([P[:, fwd.slices[fwd.candidates.index(c)]]
+                          for c in fwd.line_candidates])
+        return np.concatenate(self.lines, axis=2), coef
+
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         P = np.atleast_2d(theta)
         Y, stable = self.prediction_dft(P)
@@ -153,8 +169,7 @@ class RobustWhittle(WhittleLikelihood):
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         theta = np.atleast_2d(theta)
         ls = np.atleast_2d(log10_sigma)
-        R, stable = self.residual_dft(theta)
-        Pb = self._band_sums(R)
+        Pb, stable = self.band_sums(theta)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
         Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n

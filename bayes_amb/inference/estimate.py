@@ -16,6 +16,7 @@ from numpy.typing import NDArray
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet
 from bayes_amb.inference.whittle import WhittleLikelihood
+from bayes_amb.threads import limited_threads
 
 _BIG = 1e300
 
@@ -307,6 +308,7 @@ def _starts(post: LogPosterior, theta_ls: NDArray, n_random: int, seed: int) -> 
     return starts
 
 
+@limited_threads
 def find_map(post: LogPosterior, method: str = "lbfgs", x0: NDArray | None = None,
              refresh_noise: bool = True, n_random_starts: int = 3, seed: int = 0) -> MapResult:
     """MAP of the log posterior.

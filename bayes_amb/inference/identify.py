@@ -36,6 +36,7 @@ from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.recording import Recording, require_excitation
+from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
 NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 through the exact "
@@ -108,6 +109,7 @@ def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | Non
     return out
 
 
+@limited_threads
 def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
              priors: dict[str, Prior] | None = None,
              options: IdentifyOptions | None = None) -> IdentificationResult:

@@ -23,6 +23,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.inference.estimate import LogPosterior
+from bayes_amb.threads import limited_threads
 
 log = logging.getLogger(__name__)
 
@@ -101,6 +102,7 @@ def _diagnostics_ok(sampler: emcee.EnsembleSampler, tau: NDArray, p: int,
     return True
 
 
+@limited_threads
 def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
               n_steps: int | None = None, max_steps: int = 20000, chunk: int = 250,
               n_tau: float = 50.0,

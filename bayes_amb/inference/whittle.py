@@ -45,7 +45,8 @@ from scipy.signal import lfilter, welch
 
 from bayes_amb.control.discrete import ss_freqresp
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference.forward import ForwardModel, dft_response
+from bayes_amb.inference import kernels
+from bayes_amb.inference.forward import ForwardModel, ModalBatch, dft_response
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
 NOISE_UNITS = ("m", "m", "A")
@@ -203,7 +204,7 @@ class WhittleLikelihood:
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of eps - S(theta) x (scaled) for a batch, and the stability mask."""
-        mb, xi = self.forward.modal(theta, self.x_w)
+        mb, xi = self.modal_state(theta)
         Y = dft_response(mb, self.X, self.z, xi) / self.scale
         return self.E[None] - Y, mb.stable
 
@@ -225,16 +226,44 @@ class WhittleLikelihood:
         P[..., self._J, self._I] = np.conj(sums)
         return P
 
+    def modal_state(self, theta: NDArray) -> tuple[ModalBatch, NDArray]:
+        """Modal form of x -> eps for a batch, and xi, the modal state after the record, so
+        that DFT(S x)_k = C (z_k I - A)^-1 [B X_k - z_k xi] (the discrepancy likelihood
+        subtracts the state at its window start)."""
+        mb, xi = self.forward.modal(theta, self.x_w)
+        return mb, xi
+
+    def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
+        """Extra terms subtracted from the residual DFT: bases (nf, 4, nl) and coefficients
+        (nb, nl); none here (the discrepancy likelihood adds its spectral lines)."""
+        return None, None
+
+    def band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
+        """P_b = sum over the bins of each band of R_k R_k^H, (nb, n_bands, 4, 4), and the
+        stability mask: the compiled kernel (bayes_amb.inference.kernels), or the numpy path
+        (residual_dft, then _band_sums) with BAYES_AMB_KERNEL=numpy."""
+        theta = np.atleast_2d(theta)
+        if not kernels.use_compiled():
+            R, stable = self.residual_dft(theta)
+            return self._band_sums(R), stable
+        mb, xi = self.modal_state(theta)
+        lines, coef = self._line_terms(theta)
+        Pb = kernels.residual_band_sums(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
+                                        self.scale, self.starts, self.counts, lines, coef)
+        return Pb, mb.stable
+
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Per-band log-likelihood (nb, n_bands); -inf rows where G(theta) is not stabilised."""
         theta = np.atleast_2d(theta)
         ls = np.atleast_2d(log10_sigma)
-        R, stable = self.residual_dft(theta)
-        Pb = self._band_sums(R)                                     # (nb, nbands, 4, 4)
+        Pb, stable = self.band_sums(theta)                          # (nb, nbands, 4, 4)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
         Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
-        logdet, quad, ok = _logdet_and_trace(Phi, Pb)
+        if kernels.use_compiled():
+            logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
+        else:
+            logdet, quad, ok = _logdet_and_trace(Phi, Pb)
         ll = -(self.counts * (logdet + 4 * np.log(np.pi)) + quad)
         bad = ~stable | ~np.all(ok, axis=1) | ~np.all(np.isfinite(ll), axis=1)
         ll[bad] = -np.inf

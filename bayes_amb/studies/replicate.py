@@ -20,6 +20,7 @@ from bayes_amb.rig import load_rig
 from bayes_amb.simulate import simulate_recording
 from bayes_amb.studies.concealed import run_case
 from bayes_amb.studies.spec import StudySpec, cell_estimate, simulation_config
+from bayes_amb.threads import limited_threads
 
 N_RANK_DRAWS = 99
 """Posterior draws against which the rank of the true value is taken (SBC)."""
@@ -59,6 +60,7 @@ def _controller(spec: StudySpec, rig: Any, dt: float, speed: float | None) -> An
     return _CONTROLLERS[key]
 
 
+@limited_threads
 def run_replicate(spec: StudySpec, cell_index: int, rep: int) -> dict[str, Any]:
     """Simulate and identify one replicate; returns a flat row (never raises for numerical
     failures: they are recorded in ``error``)."""

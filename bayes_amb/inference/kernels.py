@@ -1,0 +1,258 @@
+"""Compiled (numba) kernels of the Whittle likelihood: residual DFT fused with band sums.
+
+The numpy path (:func:`bayes_amb.inference.forward.dft_response`, then
+``WhittleLikelihood._band_sums``) builds the residual DFT R (nb, nf, 4) in full, then the
+10 unique products R_i conj(R_j) of every bin (nb, nf, 10), then reduces them per band:
+three passes over arrays of megabytes on the diagnosis' whole-band records (10 000 bins),
+where the arithmetic per bin is a few hundred flops. :func:`residual_band_sums` does all of
+it bin by bin in registers,
+
+    u_s  = (Bm_s . X_k - z_k xi_s) / (z_k - lam_s)            (modal response, s = 1..ns)
+    R_k  = E_k - (Cm u) / scale - lines_k . coef              (residual DFT, 4 channels)
+    P_b += R_k R_k^H                                         (band sums, k in band b)
+
+in the same arithmetic, term by term, as the numpy path (only the order of the sums
+differs, so the two agree to a few units of rounding per term: tests/test_kernels.py).
+:func:`logdet_and_trace` is the 4 x 4 Cholesky algebra of
+``bayes_amb.inference.whittle._logdet_and_trace``, band by band.
+
+Compiled on first use and cached on disk (numba ``cache=True``); single-threaded (the
+parallelism is the batch over walkers and the tool's own worker pools). Set
+``BAYES_AMB_KERNEL=numpy`` to use the numpy path instead (for comparison).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+
+import numpy as np
+from numba import njit
+from numpy.typing import NDArray
+
+KERNEL_ENV = "BAYES_AMB_KERNEL"
+
+
+def use_compiled() -> bool:
+    """Whether the likelihood uses these kernels (``BAYES_AMB_KERNEL`` unset or "numba")."""
+    value = os.environ.get(KERNEL_ENV, "numba").strip().lower() or "numba"
+    if value not in ("numba", "numpy"):
+        from bayes_amb.errors import BayesAmbError
+
+        raise BayesAmbError(f"{KERNEL_ENV}: expected 'numba' or 'numpy', got {value!r}")
+    return value == "numba"
+
+
+CHUNK_BINS = 512
+"""Bins per pass of the kernel (whole bands; a band wider than this is one pass): the
+modal responses of a pass, 2 x ns x CHUNK_BINS doubles, stay in the L2 cache."""
+
+
+@njit(cache=True, nogil=True)
+def _residual_band_sums(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, Li, coef,
+                        starts, counts, chunks, width, out):  # pragma: no cover - compiled
+    # Real arithmetic on (channel, bin) rows, so that the loops over bins are unit-stride
+    # and vectorise (numba's complex division and per-bin temporaries cost 10x); bins are
+    # taken a few hundred at a time (whole bands) so that u stays in cache.
+    nb, ns = lam.shape
+    m = Xr.shape[0]
+    p = Er.shape[0]
+    nl = coef.shape[1]
+    ur, ui = np.empty((ns, width)), np.empty((ns, width))
+    rr, ri = np.empty((p, width)), np.empty((p, width))
+    for b in range(nb):
+        for q in range(chunks.size - 1):
+            b0, b1 = chunks[q], chunks[q + 1]
+            k0 = starts[b0]
+            n = starts[b1 - 1] + counts[b1 - 1] - k0
+            for s in range(ns):                 # u_s = (Bm_s . X_k - z_k xi_s) / (z_k - lam_s)
+                lr, li = lam[b, s].real, lam[b, s].imag
+                xr, xi_ = xi[b, s].real, xi[b, s].imag
+                urs, uis = ur[s], ui[s]
+                for k in range(n):
+                    urs[k] = -(zr[k0 + k] * xr - zi[k0 + k] * xi_)
+                    uis[k] = -(zr[k0 + k] * xi_ + zi[k0 + k] * xr)
+                for c in range(m):
+                    br, bi = Bm[b, s, c].real, Bm[b, s, c].imag
+                    xrc, xic = Xr[c], Xi[c]
+                    for k in range(n):
+                        urs[k] += xrc[k0 + k] * br - xic[k0 + k] * bi
+                        uis[k] += xrc[k0 + k] * bi + xic[k0 + k] * br
+                for k in range(n):                # times conj(z - lam) / |z - lam|^2
+                    dr = zr[k0 + k] - lr
+                    di = zi[k0 + k] - li
+                    d = 1.0 / (dr * dr + di * di)
+                    a, e = urs[k], uis[k]
+                    urs[k] = (a * dr + e * di) * d
+                    uis[k] = (e * dr - a * di) * d
+            for i in range(p):                  # R = E - (Cm u) / scale - lines . coef
+                rri, rii = rr[i], ri[i]
+                for k in range(n):
+                    rri[k] = 0.0
+                    rii[k] = 0.0
+                for s in range(ns):
+                    cr, ci = Cm[b, i, s].real * inv_scale, Cm[b, i, s].imag * inv_scale
+                    urs, uis = ur[s], ui[s]
+                    for k in range(n):
+                        rri[k] += cr * urs[k] - ci * uis[k]
+                        rii[k] += cr * uis[k] + ci * urs[k]
+                eri, eii = Er[i], Ei[i]
+                for k in range(n):
+                    rri[k] = eri[k0 + k] - rri[k]
+                    rii[k] = eii[k0 + k] - rii[k]
+                for j in range(nl):
+                    g = coef[b, j]
+                    lrj, lij = Lr[j, i], Li[j, i]
+                    for k in range(n):
+                        rri[k] -= lrj[k0 + k] * g
+                        rii[k] -= lij[k0 + k] * g
+            for band in range(b0, b1):          # P_b = sum_k R_k R_k^H
+                lo = starts[band] - k0
+                hi = lo + counts[band]
+                for i in range(p):
+                    for j in range(i, p):
+                        ar = 0.0
+                        ai = 0.0
+                        for k in range(lo, hi):
+                            ar += rr[i, k] * rr[j, k] + ri[i, k] * ri[j, k]
+                            ai += ri[i, k] * rr[j, k] - rr[i, k] * ri[j, k]
+                        out[b, band, i, j] = ar + 1j * ai
+                        if j > i:
+                            out[b, band, j, i] = ar - 1j * ai
+
+
+def _chunks(counts: NDArray, width: int) -> tuple[NDArray, int]:
+    """Band indices where each pass of the kernel starts (and the end), and the widest
+    pass in bins: consecutive whole bands of at most width bins (or one wider band)."""
+    edges = [0]
+    acc = 0
+    for band, c in enumerate(counts):
+        if acc and acc + c > width:
+            edges.append(band)
+            acc = 0
+        acc += int(c)
+    edges.append(counts.size)
+    e = np.asarray(edges, dtype=np.int64)
+    widest = max(int(counts[a:b].sum()) for a, b in itertools.pairwise(e))
+    return e, widest
+
+
+def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray,
+                       z: NDArray, E: NDArray, scale: float, starts: NDArray,
+                       counts: NDArray, lines: NDArray | None = None,
+                       coef: NDArray | None = None) -> NDArray:
+    """Band sums P_b = sum_{k in b} R_k R_k^H of the residual DFT, for a batch of systems.
+
+    Parameters
+    ----------
+    lam, Bm, Cm : ndarray
+        Modal form of the batch (``ModalBatch``): (nb, ns), (nb, ns, m), (nb, p, ns).
+    xi : ndarray
+        Modal state after the record, (nb, ns).
+    X, z : ndarray
+        Input DFT (nf, m) and the points z_k = exp(2 pi j k / N), (nf,).
+    E : ndarray
+        Data DFT (scaled), (nf, p).
+    scale : float
+        The response is divided by it (the likelihood's eps scale).
+    starts, counts : ndarray
+        First bin and number of bins of each band (int).
+    lines, coef : ndarray, optional
+        Extra terms subtracted from R_k: lines (nf, p, nl) times coef (nb, nl).
+
+    Returns
+    -------
+    ndarray
+        (nb, n_bands, p, p), Hermitian per band.
+    """
+    nb = lam.shape[0]
+    p = E.shape[1]
+    if lines is None or coef is None or coef.shape[1] == 0:
+        lines = np.zeros((E.shape[0], p, 0), dtype=complex)
+        coef = np.zeros((nb, 0))
+    out = np.empty((nb, starts.size, p, p), dtype=complex)
+    chunks, width = _chunks(np.asarray(counts), CHUNK_BINS)
+    c128, f64, i64 = np.complex128, np.float64, np.int64
+    X = np.asarray(X, dtype=c128)
+    z = np.asarray(z, dtype=c128)
+    E = np.asarray(E, dtype=c128)
+    L = np.asarray(lines, dtype=c128).transpose(2, 1, 0)              # (nl, p, nf)
+    _residual_band_sums(np.ascontiguousarray(lam, c128), np.ascontiguousarray(Bm, c128),
+                        np.ascontiguousarray(Cm, c128), np.ascontiguousarray(xi, c128),
+                        np.ascontiguousarray(X.real.T), np.ascontiguousarray(X.imag.T),
+                        np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag),
+                        np.ascontiguousarray(E.real.T), np.ascontiguousarray(E.imag.T),
+                        1.0 / scale, np.ascontiguousarray(L.real),
+                        np.ascontiguousarray(L.imag), np.ascontiguousarray(coef, f64),
+                        np.ascontiguousarray(starts, i64), np.ascontiguousarray(counts, i64),
+                        chunks, width, out)
+    return out
+
+
+@njit(cache=True, nogil=True)
+def _logdet_and_trace(Phi, P, logdet, quad, ok):  # pragma: no cover - compiled
+    # Cholesky Phi = L L^H, M = L^-1, tr(M P M^H), in real arithmetic (see above)
+    nb, nbands, n, _ = Phi.shape
+    Lr, Li = np.zeros((n, n)), np.zeros((n, n))
+    Mr, Mi = np.zeros((n, n)), np.zeros((n, n))
+    for b in range(nb):
+        for band in range(nbands):
+            good = True
+            ld = 0.0
+            for j in range(n):
+                s = Phi[b, band, j, j].real
+                for k in range(j):
+                    s -= Lr[j, k] * Lr[j, k] + Li[j, k] * Li[j, k]
+                if not s > 0:
+                    good = False
+                    s = 1.0
+                d = np.sqrt(s)
+                ld += 2 * np.log(d)
+                Lr[j, j] = d
+                Li[j, j] = 0.0
+                for i in range(j + 1, n):
+                    ar = Phi[b, band, i, j].real
+                    ai = Phi[b, band, i, j].imag
+                    for k in range(j):           # - L_ik conj(L_jk)
+                        ar -= Lr[i, k] * Lr[j, k] + Li[i, k] * Li[j, k]
+                        ai -= Li[i, k] * Lr[j, k] - Lr[i, k] * Li[j, k]
+                    Lr[i, j] = ar / d
+                    Li[i, j] = ai / d
+            for i in range(n):
+                Mr[i, i] = 1.0 / Lr[i, i]
+                Mi[i, i] = 0.0
+                for j in range(i):
+                    ar = Lr[i, j] * Mr[j, j]
+                    ai = Li[i, j] * Mr[j, j]
+                    for k in range(j + 1, i):    # + L_ik M_kj
+                        ar += Lr[i, k] * Mr[k, j] - Li[i, k] * Mi[k, j]
+                        ai += Lr[i, k] * Mi[k, j] + Li[i, k] * Mr[k, j]
+                    Mr[i, j] = -ar / Lr[i, i]
+                    Mi[i, j] = -ai / Lr[i, i]
+            q = 0.0
+            for i in range(n):
+                for k in range(i + 1):
+                    vr = 0.0
+                    vi = 0.0
+                    for j in range(i + 1):       # v = sum_j M_ij P_jk
+                        pr = P[b, band, j, k].real
+                        pi = P[b, band, j, k].imag
+                        vr += Mr[i, j] * pr - Mi[i, j] * pi
+                        vi += Mr[i, j] * pi + Mi[i, j] * pr
+                    q += vr * Mr[i, k] + vi * Mi[i, k]    # Re(v conj(M_ik))
+            logdet[b, band] = ld
+            quad[b, band] = q
+            ok[b, band] = good
+
+
+def logdet_and_trace(Phi: NDArray, P: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+    """log det Phi, tr(Phi^-1 P) and positive definiteness, for (nb, n_bands, n, n) stacks.
+
+    The same Cholesky algebra as ``bayes_amb.inference.whittle._logdet_and_trace``.
+    """
+    shape = Phi.shape[:2]
+    logdet, quad = np.empty(shape), np.empty(shape)
+    ok = np.empty(shape, dtype=np.bool_)
+    _logdet_and_trace(np.ascontiguousarray(Phi, np.complex128),
+                      np.ascontiguousarray(P, np.complex128), logdet, quad, ok)
+    return logdet, quad, ok

@@ -1,0 +1,164 @@
+"""The compiled likelihood kernels equal the numpy path they replace (issue 16).
+
+Tolerances follow from the floating-point arithmetic (u = 2^-53, gamma_n = n u / (1 - n u),
+Higham, Accuracy and Stability of Numerical Algorithms, ch. 3): both paths evaluate the same
+terms and differ only in the order of the sums, so each side's error is bounded by gamma of
+the number of operations along the way times the sum of the *absolute values* of the
+terms (the "majorant"); the difference of the two is at most twice that. A factor 4 covers
+the constants of complex multiplication and division (|fl(ab) - ab| <= sqrt(5) u |a||b|).
+A wrong term, sign or band boundary gives differences of order one against these bounds.
+"""
+
+from __future__ import annotations
+
+import itertools
+
+import numpy as np
+import pytest
+
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.discrepancy import ActuatorLag, Unbalance
+from bayes_amb.discrepancy.likelihood import RobustWhittle
+from bayes_amb.discrepancy.model import ExtendedForwardModel
+from bayes_amb.inference import kernels
+from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.offline import dual_youla_eps
+from bayes_amb.inference.whittle import WhittleLikelihood, _logdet_and_trace
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
+
+U = 2.0**-53
+NAMES = ("k_Ax", "k_By", "c_Bx", "c_By")
+
+
+def gamma(n: int) -> float:
+    return n * U / (1 - n * U)
+
+
+@pytest.fixture(scope="module")
+def rec():
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3, "c_Bx": 0.1}, dt=1e-4,
+                           duration=0.1, noise_rms=2e-8, r2_rms=0.02, seed=5,
+                           effects=(parse_effect("unbalance:u_kgm=2e-5"),))
+    return simulate_recording(rig, ctrl, cfg)[0]
+
+
+def _likelihoods(rec):
+    fm = ForwardModel(rec, NAMES)
+    eps = dual_youla_eps(fm.parts, np.asarray(rec.y), np.asarray(rec.u))
+    yield WhittleLikelihood(fm, eps), len(NAMES)
+    ext = ExtendedForwardModel(rec, NAMES, (ActuatorLag("actuator_lag", "both"),
+                                            Unbalance("unbalance", "D1")))
+    like = RobustWhittle(ext, eps)
+    like.set_noise_reference(np.r_[np.zeros(len(NAMES)), 0.05, 1.0, -0.5])
+    assert len(like.lines) == 1                     # the unbalance line enters the kernel
+    yield like, len(ext.params)
+
+
+def _batch(p: int, rng: np.random.Generator) -> np.ndarray:
+    P = 0.05 * rng.standard_normal((7, p))
+    P[:, :len(NAMES)] += [0.0, 0.3, 0.1, 0.0]
+    P[-1, 0] = -0.79                                # near the prior edge
+    return P
+
+
+def _majorant(like, P):
+    """Sum over each band of |R_i| |R_j| with |R| the absolute-value majorant of the terms,
+    and the largest number of operations along one residual entry."""
+    mb, xi = like.forward.modal(P, like.x_w)
+    num = np.abs(like.X) @ np.abs(np.swapaxes(mb.Bm, 1, 2)) + np.abs(xi)[:, None, :]
+    u_abs = num / np.abs(like.z[None, :, None] - mb.lam[:, None, :])       # (nb, nf, ns)
+    r_abs = np.abs(like.E)[None] + u_abs @ np.abs(np.swapaxes(mb.Cm, 1, 2)) / like.scale
+    lines, coef = like._line_terms(P)
+    n_ops = mb.lam.shape[1] + like.X.shape[1] + 6
+    if lines is not None:
+        r_abs = r_abs + np.einsum("kij,bj->bki", np.abs(lines), np.abs(coef))
+        n_ops += lines.shape[2]
+    outer = r_abs[..., :, None] * r_abs[..., None, :]
+    return np.add.reduceat(outer, like.starts, axis=1), n_ops
+
+
+@pytest.mark.parametrize("width", [512, 7])     # one pass; many, some bands wider than 7
+def test_band_sums_equal_the_numpy_path(rec, width, monkeypatch):
+    monkeypatch.setattr(kernels, "CHUNK_BINS", width)
+    rng = np.random.default_rng(0)
+    for like, p in _likelihoods(rec):
+        P = _batch(p, rng)
+        R, stable = like.residual_dft(P)
+        ref = like._band_sums(R)
+        mb, xi = like.forward.modal(P, like.x_w)
+        lines, coef = like._line_terms(P)
+        fast = kernels.residual_band_sums(mb.lam, mb.Bm, mb.Cm, xi, like.X, like.z, like.E,
+                                          like.scale, like.starts, like.counts, lines, coef)
+        assert stable.all()
+        bound, n_ops = _majorant(like, P)
+        tol = 4 * (4 * gamma(n_ops) + gamma(int(like.counts.max()) + 2)) * bound
+        err = np.abs(fast - ref)
+        assert np.all(err <= tol), float(np.max(err / tol))
+        # the bound is tight enough to see a residual wrong by one part in a million
+        assert not np.all(np.abs(like._band_sums(R * (1 + 1e-6)) - ref) <= tol)
+
+
+def test_logdet_and_trace_equal_the_numpy_path():
+    rng = np.random.default_rng(1)
+    n = 4
+    A = rng.standard_normal((3, 50, n, n)) + 1j * rng.standard_normal((3, 50, n, n))
+    Phi = A @ np.conj(np.swapaxes(A, -1, -2)) + 0.1 * np.eye(n)
+    B = rng.standard_normal((3, 50, n, 2 * n)) + 1j * rng.standard_normal((3, 50, n, 2 * n))
+    P = B @ np.conj(np.swapaxes(B, -1, -2))
+    Phi[0, 0] = -np.eye(n)                              # not positive definite: flagged
+    ld0, q0, ok0 = _logdet_and_trace(Phi, P)
+    ld1, q1, ok1 = kernels.logdet_and_trace(Phi, P)
+    assert np.array_equal(ok0, ok1) and not ok1[0, 0] and ok1.sum() == ok1.size - 1
+    cond = np.linalg.cond(Phi[ok1])
+    # Cholesky: backward error gamma_{n+1} |L||L^H| (Higham thm 10.3); log det sums n logs;
+    # the quadratic form inherits the condition number of Phi
+    tol_ld = 4 * gamma(n + 1) * n * (1 + cond) + 4 * gamma(n) * np.abs(ld0[ok1])
+    tol_q = 4 * gamma(3 * n + 1) * cond * (np.abs(q0[ok1]) + 1e-300) * n
+    assert np.all(np.abs(ld1[ok1] - ld0[ok1]) <= tol_ld)
+    assert np.all(np.abs(q1[ok1] - q0[ok1]) <= tol_q)
+
+
+def test_log_likelihood_is_the_same_on_both_paths(rec, monkeypatch):
+    """Per band the two paths differ by tr(Phi^-1 dP) (dP within the band-sum bound above)
+    plus the Cholesky rounding of each (bounds as in the test above)."""
+    rng = np.random.default_rng(2)
+    n = 4
+    for like, p in _likelihoods(rec):
+        P = _batch(p, rng)
+        ls = np.tile([np.log10(2e-8), -9.0, np.log10(0.02)], (P.shape[0], 1))
+        monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+        ref = like.pointwise(P, ls)
+        monkeypatch.setenv(kernels.KERNEL_ENV, "numba")
+        fast = like.pointwise(P, ls)
+        bound, n_ops = _majorant(like, P)
+        tol_p = 4 * (4 * gamma(n_ops) + gamma(int(like.counts.max()) + 2)) * bound
+        ps = like.phi_sources
+        Phi = np.einsum("bs,sfij->bfij", 10.0 ** (2 * ls), ps) * like.n
+        if isinstance(like, RobustWhittle):             # the likelihood's own Phi scaling
+            Phi = Phi * (like.nu - like.shift)[None, :, None, None]
+            weight = (like.nu + like.counts)[None]      # (nu + n_b) log det(Psi + P_b)
+            Phi_used = Phi + like.band_sums(P)[0]
+        else:
+            weight, Phi_used = 1.0, Phi
+        inv = np.abs(np.linalg.inv(Phi_used))
+        cond = np.linalg.cond(Phi_used)
+        via_p = weight * np.einsum("bfji,bfij->bf", inv, tol_p)
+        chol = 8 * gamma(3 * n + 1) * n * (1 + cond) * (like.counts + np.abs(ref))
+        assert np.all(np.abs(fast - ref) <= via_p + chol)
+
+
+def test_kernel_choice_is_validated(monkeypatch):
+    monkeypatch.setenv(kernels.KERNEL_ENV, "fortran")
+    with pytest.raises(Exception, match="BAYES_AMB_KERNEL: expected 'numba' or 'numpy'"):
+        kernels.use_compiled()
+
+
+def test_passes_cover_whole_bands_in_order():
+    counts = np.array([1, 1, 1, 5, 9, 2, 30, 3, 3])
+    edges, widest = kernels._chunks(counts, 8)
+    assert edges[0] == 0 and edges[-1] == counts.size and np.all(np.diff(edges) > 0)
+    sizes = [int(counts[a:b].sum()) for a, b in itertools.pairwise(edges)]
+    assert sizes == [8, 9, 2, 30, 6] and widest == 30

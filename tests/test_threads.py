@@ -1,0 +1,117 @@
+"""Thread control (issue 16): BLAS pools single-threaded by default, with an override."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np  # noqa: F401  (loads the BLAS library whose pools are checked)
+import pytest
+from threadpoolctl import threadpool_info, threadpool_limits
+
+from bayes_amb.cli.main import _threads_option, main
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.threads import (
+    BLAS_ENV_VARS,
+    ENV_VAR,
+    configure_process,
+    configured_threads,
+    limited_threads,
+    parse_threads,
+)
+
+
+@pytest.fixture
+def clean_env(monkeypatch):
+    for var in (ENV_VAR, *BLAS_ENV_VARS):
+        monkeypatch.delenv(var, raising=False)
+    saved = threadpool_limits(limits=None)     # configure_process limits pools for good
+    yield monkeypatch
+    saved.restore_original_limits()
+
+
+def _blas_threads() -> set[int]:
+    return {d["num_threads"] for d in threadpool_info() if d["user_api"] == "blas"}
+
+
+def test_default_fills_only_unset_variables(clean_env):
+    clean_env.setenv("OMP_NUM_THREADS", "3")
+    assert configure_process() == 1
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "1"
+    assert os.environ["MKL_NUM_THREADS"] == "1"
+    assert os.environ["OMP_NUM_THREADS"] == "3"       # the user's own setting is kept
+    assert ENV_VAR not in os.environ
+
+
+def test_explicit_count_overrides_and_is_inherited(clean_env):
+    clean_env.setenv("OPENBLAS_NUM_THREADS", "7")
+    assert configure_process(2) == 2
+    assert os.environ[ENV_VAR] == "2"
+    assert all(os.environ[v] == "2" for v in BLAS_ENV_VARS)
+    # a worker process started now (a study's pool) sees the same limit
+    code = ("import json, numpy; from threadpoolctl import threadpool_info; "
+            "print(json.dumps([d['num_threads'] for d in threadpool_info() "
+            "if d['user_api'] == 'blas']))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env=dict(os.environ)).stdout
+    assert set(json.loads(out)) == {2}
+
+
+def test_zero_leaves_the_libraries_alone(clean_env):
+    assert configure_process(0) == 0
+    assert all(v not in os.environ for v in BLAS_ENV_VARS)
+    assert configured_threads() == 0
+
+
+@pytest.mark.parametrize("value", ["-1", "two", "1.5", ""])
+def test_bad_counts_are_rejected(value):
+    with pytest.raises(BayesAmbError, match="expected a thread count >= 0"):
+        parse_threads(value, "option --threads")
+
+
+def test_bad_environment_value_names_the_variable(clean_env):
+    clean_env.setenv(ENV_VAR, "many")
+    with pytest.raises(BayesAmbError, match=f"{ENV_VAR}: expected a thread count"):
+        configured_threads()
+
+
+def test_decorated_entry_points_run_single_threaded_and_restore(clean_env):
+    @limited_threads
+    def inner() -> set[int]:
+        return _blas_threads()
+
+    with threadpool_limits(limits=2, user_api="blas"):
+        assert inner() == {1}
+        assert _blas_threads() == {2}
+        clean_env.setenv(ENV_VAR, "0")
+        assert inner() == {2}
+
+
+@pytest.mark.parametrize(("argv", "value"), [
+    (["--threads", "3", "identify", "x.csv"], "3"),
+    (["-v", "--threads=0", "bench"], "0"),
+    (["identify", "x.csv", "--threads", "3"], None),     # after the command: not global
+    (["params"], None),
+])
+def test_threads_option_is_read_before_parsing(argv, value):
+    assert _threads_option(argv) == value
+
+
+def test_cli_rejects_a_bad_thread_count_in_one_line(clean_env, capsys):
+    assert main(["--threads", "lots", "params"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "option --threads" in err
+
+
+@pytest.mark.parametrize("variant", ["default", "variable", "unprotected"])
+def test_cli_benchmark_environments_differ_only_in_the_thread_variables(variant):
+    from bayes_amb.bench.cli_case import child_env
+
+    base = {"PATH": "/bin", "PYTHONPATH": "/src", "OPENBLAS_NUM_THREADS": "4",
+            "OMP_NUM_THREADS": "2", ENV_VAR: "3"}
+    env = child_env(variant, base)
+    added = {"default": {}, "variable": {"OPENBLAS_NUM_THREADS": "1"},
+             "unprotected": {ENV_VAR: "0"}}[variant]
+    assert env == {"PATH": "/bin", "PYTHONPATH": "/src", **added}
