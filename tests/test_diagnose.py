@@ -213,7 +213,7 @@ def test_cli_diagnose_writes_the_documented_file(ctrl, tmp_path, capsys):
 
 @pytest.mark.parametrize("argv,needle", [
     (["--effects", "warp_drive"], "option --effects"),
-    (["--max-effects", "-1"], "option --max-effects"),
+    (["--max-effects", "-1"], "--max-effects: value -1 out of range: must be >= 0"),
     (["--params", "k_Zz"], "unknown parameter name"),
 ])
 def test_cli_diagnose_bad_input(ctrl, tmp_path, capsys, argv, needle):

@@ -162,3 +162,32 @@ def test_passes_cover_whole_bands_in_order():
     assert edges[0] == 0 and edges[-1] == counts.size and np.all(np.diff(edges) > 0)
     sizes = [int(counts[a:b].sum()) for a, b in itertools.pairwise(edges)]
     assert sizes == [8, 9, 2, 30, 6] and widest == 30
+
+
+def test_rows_sharing_theta_are_computed_once_and_equal_alone(rec):
+    """A gradient's steps along the noise coordinates share theta: the band sums of such a
+    batch equal those of each row alone (up to the transient's 1e-13 truncation, whose
+    length follows the batch's slowest pole)."""
+    rng = np.random.default_rng(3)
+    for like, p in _likelihoods(rec):
+        P = _batch(p, rng)[:3]
+        theta = P[[0, 1, 0, 2, 0]]
+        ls = np.tile([np.log10(2e-8), -9.0, np.log10(0.02)], (5, 1))
+        ls[[2, 4], 0] += [0.01, -0.01]
+        batch = like.pointwise(theta, ls)
+        alone = np.concatenate([like.pointwise(theta[i:i + 1], ls[i:i + 1]) for i in range(5)])
+        assert np.allclose(batch, alone, rtol=1e-12, atol=0)
+        assert np.array_equal(like.band_sums(theta)[0][0], like.band_sums(theta)[0][2])
+
+
+def test_remembered_band_sums_follow_the_noise_reference(rec):
+    like, p = list(_likelihoods(rec))[1]              # RobustWhittle: lines move with it
+    P = _batch(p, np.random.default_rng(4))[:2]
+    before = like.band_sums(P)[0].copy()
+    assert like.band_sums(P)[0] is like.band_sums(P)[0]          # remembered
+    ref = np.r_[0.3, 0.5, -0.2, 0.1, 0.05, -2.0, 1.5]   # other plant: other line bases
+    like.set_noise_reference(ref)
+    assert like._last_sums is None
+    after = like.band_sums(P)[0]
+    fresh = like._compute_band_sums(P)[0]
+    assert np.array_equal(after, fresh) and not np.allclose(after, before, rtol=1e-9)

@@ -149,7 +149,8 @@ def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
                          ) -> tuple[float, float, float]:
     """Per-evaluation time (us) of the posterior with the compiled kernel and with the numpy
     path (BAYES_AMB_KERNEL=numpy, the path before issue 16), interleaved call by call after
-    a warm-up of each; and the largest relative difference of their log posteriors."""
+    a warm-up of each (the likelihood's remembered last batch is forgotten before every
+    call); and the largest relative difference of their log posteriors."""
     import os
 
     from bayes_amb.inference.kernels import KERNEL_ENV
@@ -161,6 +162,7 @@ def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
         for r in range(repeats + 1):
             for kind in ("numba", "numpy") if r % 2 else ("numpy", "numba"):
                 os.environ[KERNEL_ENV] = kind
+                post.likelihood._last_sums = None    # no remembered batch: a real evaluation
                 t0 = time.perf_counter()
                 values[kind] = post(points)
                 if r:

@@ -145,6 +145,7 @@ class RobustWhittle(WhittleLikelihood):
             filt = lfilter(self.prefilter, [1.0], resp, axis=0)
             self.lines.append(np.fft.rfft(filt[self.start:] / self.scale,
                                           axis=0)[self.k])                   # (nf, 4, 2)
+        self._last_sums = None                      # the band sums depend on the lines
 
     def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
         """The spectral-line bases (nf, 4, 2 per line candidate) and their coefficients."""

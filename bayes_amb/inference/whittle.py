@@ -191,6 +191,7 @@ class WhittleLikelihood:
             eye = np.broadcast_to(np.eye(4) / self.scale**2, (self.n_bands, 4, 4))
             self.phi_sources = np.stack([eye, 0 * eye, 0 * eye]).astype(complex)
             self.theta_ref = np.array(theta_ref, dtype=float)
+            self._last_sums = None
             return
         A, B, C, D = self.forward.noise_system(np.asarray(theta_ref, dtype=float))
         H = ss_freqresp(A, B, C, D, self.z) / self.scale            # (nf, 4, 12)
@@ -201,6 +202,7 @@ class WhittleLikelihood:
             phi.append(np.add.reduceat(P, self.starts, axis=0) / self.counts[:, None, None])
         self.phi_sources = np.stack(phi)                            # (3, nbands, 4, 4)
         self.theta_ref = np.array(theta_ref, dtype=float)
+        self._last_sums = None
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of eps - S(theta) x (scaled) for a batch, and the stability mask."""
@@ -241,8 +243,29 @@ class WhittleLikelihood:
     def band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """P_b = sum over the bins of each band of R_k R_k^H, (nb, n_bands, 4, 4), and the
         stability mask: the compiled kernel (bayes_amb.inference.kernels), or the numpy path
-        (residual_dft, then _band_sums) with BAYES_AMB_KERNEL=numpy."""
-        theta = np.atleast_2d(theta)
+        (residual_dft, then _band_sums) with BAYES_AMB_KERNEL=numpy.
+
+        P_b depends on theta only, not on the noise intensities: rows of a batch with the
+        same theta (a gradient's steps along the noise coordinates) are computed once, and
+        the last batch is remembered (a noise-only fit evaluates one theta many times)
+        until set_noise_reference. The arrays returned may be shared: do not modify them.
+        """
+        theta = np.ascontiguousarray(np.atleast_2d(theta), dtype=float)
+        key = (id(self.forward), kernels.use_compiled(), theta.shape, theta.tobytes())
+        last = getattr(self, "_last_sums", None)
+        if last is not None and last[0] == key:
+            return last[1], last[2]
+        uniq, inverse = np.unique(theta, axis=0, return_inverse=True)
+        if uniq.shape[0] < theta.shape[0]:
+            Pb, stable = self._compute_band_sums(uniq)
+            inverse = inverse.reshape(-1)
+            Pb, stable = Pb[inverse], stable[inverse]
+        else:
+            Pb, stable = self._compute_band_sums(theta)
+        self._last_sums = (key, Pb, stable)
+        return Pb, stable
+
+    def _compute_band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         if not kernels.use_compiled():
             R, stable = self.residual_dft(theta)
             return self._band_sums(R), stable
