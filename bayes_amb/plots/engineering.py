@@ -8,6 +8,7 @@ Legends sit outside the axes (below the figure), so that they never cover data.
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import numpy as np
@@ -54,7 +55,9 @@ def plot_modes_vs_speed(res: Any) -> Figure:
             continue
         c = _MODE_COLOURS[m % len(_MODE_COLOURS)]
         for ax, v in ((ax_f, f), (ax_d, d)):
-            lo, med, hi = np.nanquantile(v, [0.05, 0.5, 0.95], axis=0)
+            with warnings.catch_warnings():            # a speed where the mode is missing
+                warnings.simplefilter("ignore", RuntimeWarning)
+                lo, med, hi = np.nanquantile(v, [0.05, 0.5, 0.95], axis=0)
             ax.errorbar(rpm, med, yerr=[med - lo, hi - med], color=c, marker="o", ms=3.5,
                         lw=1.2, capsize=3, label=label)
     ax_f.plot(rpm, rpm / 60.0, color="k", lw=1.0, ls="--", label="1x running speed")
