@@ -14,8 +14,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "answers", help="bearing ks and c, closed-loop modes, log decrements, API 617 "
         "margins, ISO 14839-3 peak sensitivity, with 90 % intervals",
-        description="Propagate the posterior of an identification run (RUN_DIR) through the "
-        "full FE plant closed with the recorded controller.")
+        description="Propagate the posterior of an identification run (RUN_DIR; after the "
+        "diagnosis when RUN_DIR holds one that named physics) through the full FE plant "
+        "closed with the recorded controller.")
     p.add_argument("run_dir", metavar="RUN_DIR", help="folder with summary.json (and "
                    "posterior.nc)")
     p.add_argument("--recording", default=None, help="the recording (default: the one "
@@ -52,14 +53,18 @@ def run(args: argparse.Namespace) -> int:
     if run_data.recording is None:
         raise BayesAmbError(f"run folder {args.run_dir}: field recording: "
                             f"{run_data.recording_note}")
-    res = physical_quantities(run_data, run_data.recording, _speeds(args.speeds),
+    from bayes_amb.report.engineering import final_draws
+
+    draws, source = final_draws(run_data, args.draws, 0)
+    res = physical_quantities(draws, run_data.recording, _speeds(args.speeds),
                               n_draws=args.draws, model=args.model)
     data = res.to_dict()
+    data["source"] = source
     if args.out:
         write_text_atomic(args.out, json.dumps(to_jsonable(data), indent=2) + "\n")
     lines = [f"{k:<52} {q.value:>12.5g}  [{q.lo:.5g}, {q.hi:.5g}]  {q.unit}"
              + ("" if q.estimated else "  (not estimated)")
              for k, q in res.quantities.items()]
-    emit(data, "\n".join([*res.notes, "quantity  median  [90 % interval]  unit", *lines]),
-         args.json)
+    head = [*res.notes, f"from {source}", "quantity  median  [90 % interval]  unit"]
+    emit(data, "\n".join([*head, *lines]), args.json)
     return 0
