@@ -168,7 +168,8 @@ def run_demo(out_dir: str | Path = "reports/demo", config: DemoConfig | None = N
     # 4. reports
     t = time.perf_counter()
     say("4/4 reports")
-    opts = ReportOptions(sensitivity_points=60, campbell_speeds=4) if cfg.quick \
+    opts = ReportOptions(sensitivity_points=60, campbell_speeds=4, engineering_draws=10) \
+        if cfg.quick \
         else ReportOptions()
     argv = ["bayes-amb", "demo", "--out", str(out)]
 

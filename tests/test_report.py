@@ -155,7 +155,7 @@ def test_numbers_come_from_the_run(made, cli_report):
     mean = float(cells[1].split("±")[0])
     assert mean == pytest.approx(p["mean"], abs=5 * p["sd"])
     assert float(cells[-1].split(" (")[0]) == 0.5            # true value, simulated
-    assert "bayes-amb report" in html and made["summary"]["recording"] in html
+    assert "bayes-amb report" in html and made["csv"].name in html
     from bayes_amb.report.collect import sha256_file
     assert sha256_file(made["csv"]) in html
 
@@ -213,3 +213,79 @@ def test_residual_tests_detect_model_error():
     bad = residual_tests(mk(noise + 0.3 * lagged))
     assert bad.model_error.all()
     assert np.all(bad.z_cross > 10)
+
+
+def _visible_font_sizes(fig, text_width_in: float = 7.17, max_height_in: float = 8.98):
+    """Font sizes (pt) of every visible, non-empty text of a Figure as printed: scaled by
+    the factor the PDF template applies to fit the A4 text width (182 mm) and the 228 mm
+    figure height."""
+    w, h = fig.get_size_inches()
+    scale = min(1.0, text_width_in / w, max_height_in / h)
+    fig.canvas.draw()
+    sizes = []
+    for t in fig.findobj(lambda a: hasattr(a, "get_fontsize") and hasattr(a, "get_text")):
+        if t.get_visible() and t.get_text().strip():
+            sizes.append((t.get_fontsize() * scale, t.get_text()))
+    return sizes
+
+
+def test_report_hygiene(made, cli_report):
+    """No absolute paths, no "None", the figures all there, the engineering section in."""
+    _, printed, html = cli_report
+    text = re.sub(r'src="data:[^"]*"', "", html)
+    assert str(made["dir"]) not in text
+    assert not re.search(r"(?<![\w/])/(tmp|home|work|root|Users)/", text)
+    assert not re.search(r"\bNone\b", text)
+    assert printed["n_figures"] == len(re.findall(r"<figure ", html))
+    assert printed["n_figures"] >= 19          # 15 before, 4 engineering figures
+    for key in ("eng_modes", "eng_sens", "eng_plant", "eng_compliance"):
+        assert f'id="fig-{key}"' in html
+    assert SECTION_TITLES["engineering"] in printed["sections"]
+
+
+def test_engineering_figures_fonts_at_least_7pt(made):
+    from bayes_amb.engineering import frequency_responses, physical_quantities
+    from bayes_amb.plots import engineering as pe
+
+    run = collect_run(made["run"])
+    res = physical_quantities(run, run.recording, [25000.0, 31500.0], n_draws=5,
+                              model="reduced")
+    frf = frequency_responses(run, run.recording, n_draws=5, model="reduced")
+    for fig in (pe.plot_modes_vs_speed(res), pe.plot_sensitivity_band(res),
+                pe.plot_frf(frf, "plant"), pe.plot_frf(frf, "compliance")):
+        small = [(round(s, 2), t) for s, t in _visible_font_sizes(fig) if s < 7.0]
+        assert not small, small
+
+
+def test_study_seed_is_read_from_the_manifest(bare, tmp_path):
+    """study.json holds StudySpec.to_dict() under "study" (nested "study" table); the
+    flat form of the fixture works too."""
+    from bayes_amb.report.collect import _read_study
+
+    assert "seed 11" in bare[3] and "seed None" not in bare[3]
+    (tmp_path / "study.json").write_text(json.dumps(
+        {"study": {"study": {"name": "noise", "description": "d", "seed": 7}},
+         "conclusions": ["c"]}))
+    st = _read_study(tmp_path)
+    assert (st.seed, st.name) == (7, "noise")
+
+
+def test_answers_cli(made, capsys, tmp_path):
+    """`bayes-amb answers` prints the same numbers as the API and writes JSON; a bad
+    option is one line and exit status 2."""
+    from bayes_amb.engineering import physical_quantities
+
+    out = tmp_path / "answers.json"
+    argv = ["answers", str(made["run"]), "--draws", "5", "--model", "reduced",
+            "--speeds", "31500", "--json", "--out", str(out)]
+    assert main(argv) == 0
+    printed = json.loads(capsys.readouterr().out)
+    assert json.loads(out.read_text()) == printed
+    run = collect_run(made["run"])
+    api = physical_quantities(run, run.recording, [31500.0], n_draws=5, model="reduced")
+    q = printed["quantities"]["bearing By: ks"]
+    assert q["hdi90"] == pytest.approx([api.quantities["bearing By: ks"].lo,
+                                        api.quantities["bearing By: ks"].hi])
+    assert main(["answers", str(made["run"]), "--speeds", "fast"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--speeds" in err[0]

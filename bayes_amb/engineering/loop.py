@@ -150,9 +150,9 @@ class LoopModes:
 
     lam (6,) continuous-equivalent eigenvalues in rad/s (Im > 0), in the order of
     MODE_LABELS, nan where the mode is not underdamped; eig (n,) every discrete
-    closed-loop eigenvalue; V (n, n) its right eigenvectors and W = V^-1; B_d (n, 4) the
-    closed loop's input matrix of an output disturbance d (y = G u + d), C_y (4, n) its
-    output y, so that S(z) = I + C_y V diag(1/(z - eig)) W B_d (output sensitivity); B_u
+    closed-loop eigenvalue; V (n, n) its right eigenvectors (W = V^-1 on demand); B_d
+    (n, 4) the closed loop's input matrix of an output disturbance d (y = G u + d), C_y
+    (4, n) its output y, so that S(z) = I + C_y V diag(1/(z - eig)) W B_d (output sensitivity); B_u
     (n, 4) the plant-input current; vectors (6, n) the eigenvectors of the reported modes
     (zero where a mode is missing), for matching modes between plants.
     """
@@ -160,12 +160,20 @@ class LoopModes:
     lam: NDArray
     eig: NDArray
     V: NDArray
-    W: NDArray
     B_d: NDArray
     C_y: NDArray
     B_u: NDArray
     dt: float
     vectors: NDArray
+
+    @property
+    def W(self) -> NDArray:
+        """V^-1 (computed on first use)."""
+        w = self.__dict__.get("_W")
+        if w is None:
+            w = np.linalg.inv(self.V)
+            object.__setattr__(self, "_W", w)
+        return w
 
     def sensitivity_diag(self, freq_hz: NDArray) -> NDArray:
         """|diag (I - G K)^-1| per axis at ``freq_hz`` (Hz), shape (n_f, 4)."""
@@ -213,7 +221,6 @@ def closed_loop_modes(rig: Rig, controller: ControllerFile, speed_rpm: float,
                       np.asarray(controller.C[:4]), np.asarray(controller.D[:4, :4]))
     Acl = closed_loop_matrix(Ad, Bd, C, Ak, Bk, Ck, Dk)
     eig, V = np.linalg.eig(Acl)
-    W = np.linalg.inv(V)
     n = Ad.shape[0]
     basis = _basis(rig, float(speed_rpm), model)
     eta = basis.W @ V[:n]                                   # open-loop modal content
@@ -254,5 +261,5 @@ def closed_loop_modes(rig: Rig, controller: ControllerFile, speed_rpm: float,
     B_d = np.vstack([Bd @ Dk, Bk])
     C_y = np.hstack([C, np.zeros((C.shape[0], nk))])
     B_u = np.vstack([Bd, np.zeros((nk, Bd.shape[1]))])
-    return LoopModes(lam=out, eig=eig, V=V, W=W, B_d=B_d, C_y=C_y, B_u=B_u, dt=dt,
+    return LoopModes(lam=out, eig=eig, V=V, B_d=B_d, C_y=C_y, B_u=B_u, dt=dt,
                      vectors=vec)

@@ -75,7 +75,7 @@ def plot_residual_spectra(ds: xr.Dataset, bands: list[list[float]] | None = None
             ax.set_ylabel("PSD (µm²/Hz)")
         if j >= 2:
             ax.set_xlabel("frequency (Hz)")
-    axes[0, 0].legend(fontsize=7, loc="lower left")
+    axes[0, 0].legend(fontsize=8, loc="lower left")
     return fig
 
 
@@ -85,11 +85,15 @@ def plot_candidates(report: dict[str, Any]) -> Figure:
     ones), with the acceptance threshold."""
     rows = report["candidates"]
     rounds = sorted({r["round"] for r in rows})
-    fig, axes = _grid(1, len(rounds), (4.2 * len(rounds), 4.4), sharey=False)
+    ncol = min(2, len(rounds))
+    nrow = -(-len(rounds) // ncol)
+    fig, axes = _grid(nrow, ncol, (7.2, min(4.2 * nrow, 8.8)), sharey=False)
+    for extra in range(len(rounds), nrow * ncol):
+        axes[extra // ncol, extra % ncol].set_visible(False)
     thr = float(report.get("criterion", "3").split()[-1]) if report.get("criterion") else 3.0
     accepted = {(e["effect"], e["location"]) for e in report["explanations"]}
     for k, rnd in enumerate(rounds):
-        ax = axes[0, k]
+        ax = axes[k // ncol, k % ncol]
         rs = [r for r in rows if r["round"] == rnd]
         labels = [f"{r['effect']}@{r['location']}" for r in rs]
         gain = [max(r["screen_gain"] or 0.0, 1e-2) for r in rs]
@@ -102,13 +106,14 @@ def plot_candidates(report: dict[str, Any]) -> Figure:
             ax.plot(max(v, 1e-2), i, "D", color=_AFTER if acc else _BEFORE, ms=6)
         ax.axvline(thr, color="k", ls="--", lw=0.8)
         ax.set_xscale("log")
-        ax.set_yticks(y, labels, fontsize=7)
+        ax.set_yticks(y, labels, fontsize=8)
         ax.invert_yaxis()
         ax.set_title(f"round {rnd}")
         ax.set_xlabel("nats (log scale)")
     axes[0, 0].plot([], [], "D", color=_AFTER, label="log BF, accepted")
     axes[0, 0].plot([], [], "D", color=_BEFORE, label="log BF, rejected")
-    axes[0, 0].legend(fontsize=7, loc="lower right")
+    handles, labs = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labs, loc="outside lower center", ncols=3, fontsize=8)
     return fig
 
 
@@ -171,10 +176,10 @@ def plot_benchmark(table: dict[str, Any]) -> Figure:
               for c in cases]
     ax.bar(x, vals, color=colors)
     for i, (v, k) in enumerate(zip(vals, n, strict=True)):
-        ax.text(i, min(v, 1.0) + 0.02, f"{v:.0%}\nn={k}", ha="center", fontsize=7)
+        ax.text(i, min(v, 1.0) + 0.02, f"{v:.0%}\nn={k}", ha="center", fontsize=8)
     for goal, ls in ((0.9, "--"), (0.7, ":")):
         ax.axhline(goal, color="k", lw=0.8, ls=ls)
-    ax.set_xticks(x, [c.replace("+", "+\n") for c in cases], fontsize=7, rotation=30,
+    ax.set_xticks(x, [c.replace("+", "+\n") for c in cases], fontsize=8, rotation=30,
                   ha="right")
     ax.set_ylim(0, 1.15)
     ax.set_ylabel("share correct")

@@ -217,7 +217,8 @@ def _find_recording(run: RunData, explicit: str | Path | None) -> None:
         found = [c for c in _recording_candidates(named, run.run_dir)
                  if c.suffix.lower() == ".csv" and c.is_file()]
         if not found:
-            run.recording_note = (f"the recording {named!r} named in summary.json was not "
+            run.recording_note = (f"the recording {Path(named).name!r} named in summary.json "
+                                  "was not "
                                   "found (give it with --recording); sections that need the "
                                   "rig, controller or signals are left out")
             log.warning("%s", run.recording_note)
@@ -252,6 +253,8 @@ def _read_study(path: Path) -> StudyData:
         raise ReportError(f"study manifest {path / 'study.json'}: field conclusions: missing "
                           "(the study has not finished)")
     spec = m.get("study") or {}
+    if isinstance(spec, dict) and isinstance(spec.get("study"), dict):
+        spec = spec["study"]                    # study.json holds StudySpec.to_dict()
     conc = m["conclusions"]
     if isinstance(conc, str):
         conc = [conc]

@@ -10,6 +10,7 @@ fallback when WeasyPrint is unavailable.
 from __future__ import annotations
 
 import logging
+import math
 import sys
 import textwrap
 import time
@@ -21,12 +22,14 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb import __version__
+from bayes_amb.control.robustness import iso14839_zone
 from bayes_amb.io.atomic import atomic_path, write_text_atomic
 from bayes_amb.report import sections as sc
 from bayes_amb.report.collect import ReportError, RunData
 from bayes_amb.report.derived import derive
-from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, gsd
+from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, g, gsd
 from bayes_amb.rig import CHANNELS
+from bayes_amb.uncertainty import get_spec
 
 __all__ = ["PDF_BACKENDS", "ReportResult", "build_sections", "render_html", "summary_section",
            "write_pdf", "write_report"]
@@ -177,34 +180,127 @@ def write_pdf(sections: list[Section], meta: dict[str, Any], path: Path,
     return "matplotlib"
 
 
+def _sd(v: dict[str, Any]) -> float:
+    sd = v.get("sd")
+    if isinstance(sd, (int, float)) and math.isfinite(sd):
+        return float(sd)
+    lo, hi = v.get("hdi90", [math.nan, math.nan])
+    return float(hi - lo) / 3.29
+
+
+def _estimate(n: str, v: dict[str, Any], run: RunData, truth: dict[str, float]) -> str:
+    sd, (lo, hi) = _sd(v), v["hdi90"]
+    spec = get_spec(n)
+    sc = run.physical_scale(n)
+    t = f"; true value {truth[n]:g}" if n in truth else ""
+    return (f"{n} = {gsd(v['mean'], sd)} (90 % HDI {gsd(lo, sd)} to {gsd(hi, sd)}), "
+            f"physical {spec.physical_label} = {gsd(v['mean'] * sc, abs(sd * sc))}\u00a0"
+            f"{spec.unit.replace('/', '/\u2060')}{t}")
+
+
+def _flags(run: RunData, truth: dict[str, float]) -> list[str]:
+    """Where the corrected (after-diagnosis) model is less consistent with other evidence
+    than the nominal one: a channel it fits worse, an estimate that moves onto a prior
+    bound, or (simulated data) an interval that loses the truth the nominal one held."""
+    dg = run.diagnosis or {}
+    out = []
+    fit = dg.get("fit") or {}
+    before, after = fit.get("before") or {}, fit.get("after") or {}
+    for key, worse, what in (("nrmse", lambda a, b: a > b * 1.001, "a larger NRMSE"),
+                             ("whiteness_p", lambda a, b: a < b and a < 0.01,
+                              "a less white residual")):
+        bv, av = before.get(key) or {}, after.get(key) or {}
+        if isinstance(bv, dict) and isinstance(av, dict):
+            bad = [ch for ch in av if isinstance(av.get(ch), (int, float))
+                   and isinstance(bv.get(ch), (int, float)) and worse(av[ch], bv[ch])]
+            if bad:
+                out.append(f"FLAG: the corrected model has {what} than the nominal one on "
+                           f"{', '.join(bad)}.")
+    pb, pa = dg.get("parameters_before") or {}, dg.get("parameters_after") or {}
+    for n in pa:
+        a, b = pa[n], pb.get(n, {})
+        text = str(run.summary.get("priors", {}).get(n, ""))
+        if text.startswith("uniform(") and text.endswith(")") and "hdi90" in a:
+            lo_b, hi_b = (float(x) for x in text[8:-1].split(","))
+            tol = 0.01 * (hi_b - lo_b)
+            if any(abs(e - bd) <= tol for e in a["hdi90"] for bd in (lo_b, hi_b)):
+                out.append(f"FLAG: {n} after the correction presses against its prior "
+                           "bound; the correction does not settle it.")
+        if n in truth and "hdi90" in a and "hdi90" in b:
+            t = truth[n]
+            if not a["hdi90"][0] <= t <= a["hdi90"][1] and b["hdi90"][0] <= t <= b["hdi90"][1]:
+                out.append(f"FLAG: {n}'s corrected 90 % HDI misses the true value {t:g}, "
+                           "which the nominal fit's interval held.")
+    for c in dg.get("checks") or []:
+        if isinstance(c, dict) and c.get("passed") is False:
+            out.append(f"FLAG (diagnosis check): {c.get('name', c.get('check', '?'))}: "
+                       f"{c.get('message', c.get('detail', 'failed'))}")
+    return out
+
+
 def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
+    """Leads with the final model: after the diagnosis when it named physics (with the
+    identification's nominal fit as "before"), else the identification."""
     s, truth = run.summary, run.true_theta()
     bullets = []
-    for n in run.names:
-        p = s["parameters"][n]
-        lo, hi = p["hdi90"]
-        t = f"; true value {truth[n]:g}" if n in truth else ""
-        sd = p.get("sd")
-        bullets.append(f"{n} = {gsd(p['mean'], sd)} (90 % HDI {gsd(lo, sd)} to "
-                       f"{gsd(hi, sd)}), physical {p['physical']} = "
-                       f"{gsd(p['physical_mean'], p.get('physical_sd'))}\u00a0"
-                       f"{p['unit'].replace('/', '/\u2060')}{t}.")
-    bullets += [f"{n}: the posterior presses against the prior bound {b:g}. The data would "
+    dg = run.diagnosis or {}
+    named = [str(e.get("description", e.get("effect", "?")))
+             for e in dg.get("explanations") or []]
+    after = dg.get("parameters_after") or {}
+    if named and after:
+        bullets.append("Final model: the nominal model with " + "; ".join(named)
+                       + " (named by the diagnosis; see Model discrepancy).")
+        for n in run.names:
+            if n not in after:
+                continue
+            p = s["parameters"][n]
+            bullets.append(_estimate(n, after[n], run, truth) + ". Before (nominal model, "
+                           f"identification): {gsd(p['mean'], p.get('sd'))} (90 % HDI "
+                           f"{gsd(p['hdi90'][0], p.get('sd'))} to "
+                           f"{gsd(p['hdi90'][1], p.get('sd'))}).")
+            pb = (dg.get("parameters_before") or {}).get(n)
+            if pb and abs(pb["mean"] - p["mean"]) > 0.5 * max(_sd(pb), 1e-12):
+                bullets.append(f"{n}: the diagnosis's own nominal fit gives "
+                               f"{g(pb['mean'])}, not {g(p['mean'])}"
+                               ": it uses every frequency up to Nyquist with an integrated "
+                               "noise spectrum, the identification only the reduced "
+                               "model's validity band.")
+        bullets += _flags(run, truth)
+    else:
+        bullets += [_estimate(n, s["parameters"][n], run, truth) + "." for n in run.names]
+        if dg:
+            bullets.append("Model discrepancy: " + ("a mismatch was located but no missing "
+                           "physics named" if (dg.get("mismatch") or {}).get("detected")
+                           else "no mismatch found") + " (see Model discrepancy).")
+    if dg.get("unexplained"):
+        bullets.append(f"The diagnosis leaves part of the mismatch unexplained: "
+                       f"{dg['unexplained']}.")
+    bullets += [("Before the diagnosis, " if named and after else "")
+                + f"{n}: the posterior presses against the prior bound {b:g}. The data would "
                 "move it further than the prior allows, often a sign that the model misses "
                 "an effect (see Validation)." for n, b in run.prior_bound_hits()]
     bullets.append("The sampler converged (R-hat ≤ 1.01, ESS ≥ 400, ≥ 50 τ)."
                    if s.get("converged") else "The sampler did NOT converge: treat the "
                    "intervals as provisional (see Identification).")
     bullets += list(s.get("identifiability", {}).get("notes", []))
+    if "eng" in facts:
+        ld, pk = facts["eng"]["min_logdec"], facts["eng"]["worst_peak"]
+        ok = "met" if ld.lo > 0.1 else "NOT met" if ld.hi <= 0.1 else "uncertain"
+        bullets.append(f"Closed-loop stability at {facts['eng']['speed_rpm']:.0f} rpm: "
+                       f"smallest log decrement {g(ld.value, 3)} (90 % {g(ld.lo, 3)} to "
+                       f"{g(ld.hi, 3)}); API 617-style criterion log dec > 0.1: {ok}. "
+                       f"Largest peak sensitivity {g(pk.value, 3)} dB (90 % {g(pk.lo, 3)} "
+                       f"to {g(pk.hi, 3)} dB): ISO 14839-3 zone "
+                       f"{iso14839_zone(10 ** (pk.value / 20))} (zone "
+                       f"{iso14839_zone(10 ** (pk.hi / 20))} at the upper end). See "
+                       "Engineering answers.")
     if "snr" in facts:
-        v = [x["snr_db"] for x in facts["snr"]]
-        b = [x["snr_band_db"] for x in facts["snr"]]
-        bullets.append(f"SNR per channel {min(v):.1f} to {max(v):.1f} dB over the whole band, "
-                       f"{min(b):.1f} to {max(b):.1f} dB in the band the likelihood uses.")
-    if "cd" in facts:
-        nom, ide = facts["cd"]["sens"]
-        bullets.append(f"ISO 14839-3 zone {nom.zone} with the nominal plant, {ide.zone} with "
-                       "the identified plant.")
+        v = [x["response_snr_db"] for x in facts["snr"] if "response_snr_db" in x]
+        if v:
+            bullets.append(f"Response-to-excitation SNR per channel {min(v):.1f} to "
+                           f"{max(v):.1f} dB: the power of the part of y the excitation "
+                           "drives through the identified loop against the rest (noise, "
+                           "disturbances, unmodelled response).")
     if "rt" in facts and min(x["snr_db"] for x in facts["snr"]) <= 120:
         bad = [ch for ch, e in zip(CHANNELS, facts["rt"].model_error, strict=True) if e]
         bullets.append("The residual correlates with the excitation on " + ", ".join(bad)
@@ -213,17 +309,6 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
                        "no sign of model error at this noise level.")
     elif "rt" in facts:
         bullets.append("S(θ̂) x reproduces the data to round-off (noise-free data).")
-    dg = run.diagnosis or {}
-    if dg.get("explanations") or dg.get("mismatch"):
-        named = "; ".join(str(e.get("description", e.get("effect", "?")))
-                          for e in dg.get("explanations", []))
-        after = dg.get("parameters_after", {})
-        moved = ", ".join(f"{n} {v['mean']:+.3f} (90 % HDI {v['hdi90'][0]:+.3f} to "
-                          f"{v['hdi90'][1]:+.3f})" for n, v in after.items())
-        bullets.append(("Model discrepancy: " + named + "." if named else
-                        "Model discrepancy: no missing physics named.")
-                       + (f" With it in the model: {moved}." if named and moved else "")
-                       + " (See Model discrepancy.)")
     if run.recording_note:
         bullets.append(f"Note: {run.recording_note}.")
     return Section("summary", SECTION_TITLES["summary"], bullets=bullets)
@@ -238,6 +323,12 @@ def build_sections(run: RunData, argv: list[str], opts: ReportOptions,
     body: list[Section] = []
     d = None
     if run.recording is not None:
+        from bayes_amb.report.engineering import engineering_facts, engineering_section
+
+        say("engineering answers: modes, margins, sensitivities, frequency responses")
+        sec, eng, _frf = engineering_section(run, opts)
+        facts["eng"] = engineering_facts(eng)
+        body.append(sec)
         say("model figures")
         d = derive(run)
         body.append(sc.model_section(run, d, opts))
@@ -260,7 +351,8 @@ def build_sections(run: RunData, argv: list[str], opts: ReportOptions,
     name = Path(str(run.summary["recording"])).stem
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     meta = {"title": f"Identification report: {name}",
-            "subtitle": f"Run folder {run.run_dir}; made {now} by bayes-amb {__version__}",
+            "subtitle": f"Run folder {run.run_dir.name}; made {now} by bayes-amb "
+                        f"{__version__}",
             "notes": [run.recording_note] if run.recording_note else []}
     return [summary_section(run, facts), *body], meta
 

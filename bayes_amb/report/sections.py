@@ -25,7 +25,8 @@ from bayes_amb.rig import CHANNELS
 from bayes_amb.rotor import bending_frequencies_hz, unstable_poles
 from bayes_amb.uncertainty import get_spec
 
-SECTION_TITLES = {"summary": "Summary", "model": "Rig and model", "controller": "Controller",
+SECTION_TITLES = {"summary": "Summary", "engineering": "Engineering answers",
+                  "model": "Rig and model", "controller": "Controller",
                   "data": "Data", "identification": "Identification",
                   "validation": "Validation", "discrepancy": "Model discrepancy",
                   "studies": "Studies", "provenance": "How this was made"}
@@ -62,11 +63,13 @@ class Section:
 @dataclass(frozen=True)
 class ReportOptions:
     """sensitivity_points: frequencies of the full-plant sensitivity; campbell_speeds:
-    speeds of the Campbell diagram; seed: which posterior draws the figures show."""
+    speeds of the Campbell diagram; seed: which posterior draws the figures show;
+    engineering_draws: posterior draws the engineering answers are propagated through."""
 
     sensitivity_points: int = 300
     campbell_speeds: int = 13
     seed: int = 0
+    engineering_draws: int = 60
 
 
 def g(v: Any, digits: int = 4) -> str:
@@ -98,6 +101,32 @@ def gsd(v: Any, sd: Any) -> str:
         if v != 0 else 2
     n = int(np.clip(digits, 4, 12))
     return f"{v:#.{n}g}".rstrip(".") if 1e-4 <= abs(v) < 10 ** n else g(v, n)
+
+
+def display_path(path: Any, start: Any = None) -> str:
+    """A path as the report prints it: never absolute. Relative to ``start`` (default: the
+    working directory) when that needs no more than one '..', else the file name.
+
+    Examples
+    --------
+    >>> display_path("/data/demo/rec.csv", "/data/demo/run"), display_path("/a/b/rec.csv", "/x/y")
+    ('../rec.csv', 'rec.csv')
+    """
+    import os
+
+    p = str(path)
+    if not os.path.isabs(p):
+        return p
+    try:
+        rel = os.path.relpath(p, start or os.getcwd())
+    except ValueError:
+        return os.path.basename(p)
+    return rel if rel.count("..") <= 1 else os.path.basename(p)
+
+
+def display_argv(argv: list[str]) -> str:
+    """The command line with every absolute path shown by :func:`display_path`."""
+    return shlex.join([display_path(a) if a.startswith("/") else a for a in argv])
 
 
 def _section(key: str, **kw: Any) -> Section:
@@ -158,12 +187,21 @@ def data_section(run: RunData, d: dv.Derived) -> tuple[Section, list[dict[str, f
     port = d.forward.port
     band = run.band_hz()
     snr = dv.snr_table(d, band)
+    from bayes_amb.engineering import response_snr_db
+
+    rsnr = response_snr_db(rec, dict(zip(run.names, (float(v) for v in d.theta),
+                                         strict=True)))
+    for row, v in zip(snr, rsnr, strict=True):
+        row["response_snr_db"] = float(v)
     sym, unit, scale = fg.pd.excitation_label(port)
-    rows = [[ch, g(s["x_rms"] * scale), g(1e6 * s["eps_rms"]), g(1e6 * s["signal_rms"]),
-             g(1e6 * s["residual_rms"]), f"{s['snr_db']:.1f}", f"{s['snr_band_db']:.1f}"]
+    rows = [[ch, g(s["x_rms"] * scale), f"{s['response_snr_db']:.1f}", g(1e6 * s["eps_rms"]),
+             g(1e6 * s["signal_rms"]), g(1e6 * s["residual_rms"]), f"{s['snr_db']:.1f}",
+             f"{s['snr_band_db']:.1f}"]
             for ch, s in zip(CHANNELS, snr, strict=True)]
-    band_col = f"SNR to {band:.0f} Hz (dB)" if band else "SNR in band (dB)"
-    paras = [f"Recording {rec.source}: {rec.n_samples} samples at dt = {rec.dt:g} s "
+    band_col = f"S(θ̂)x / residual to {band:.0f} Hz (dB)" if band else \
+        "S(θ̂)x / residual in band (dB)"
+    paras = [f"Recording {display_path(rec.source, run.run_dir)}: {rec.n_samples} samples "
+             f"at dt = {rec.dt:g} s "
              f"({rec.n_samples * rec.dt:g} s), {rec.speed_rpm:.0f} rpm, excitation '{port}' "
              f"({rec.meta.get('excitation', {}).get('injected_at', {}).get(port, '?')})."]
     if rec.notes:
@@ -181,12 +219,16 @@ def data_section(run: RunData, d: dv.Derived) -> tuple[Section, list[dict[str, f
                    f"{g(t.get('noise_rms'))} m, r1 {g(t.get('r1_rms'))} m, r2 "
                    f"{g(t.get('r2_rms'))} A RMS; seed {t.get('seed')}."]
     sec = _section("data", paragraphs=paras, bullets=bullets, tables=[Table(
-        "Signal and noise per channel: signal = S(θ̂) x at the posterior mean, noise = the "
-        "residual ε − S(θ̂) x", ["channel", f"{sym} RMS ({unit})", "ε RMS (µm)",
-                                 "S(θ̂)x RMS (µm)", "residual RMS (µm)", "SNR (dB)",
-                                 band_col], rows,
-        "The second SNR counts only the frequencies the likelihood uses (the reduced "
-        "model's validity band); that is the SNR the estimate sees.")],
+        "Signal and noise per channel", ["channel", f"{sym} RMS ({unit})",
+                                         "response SNR (dB)", "ε RMS (µm)",
+                                         "S(θ̂)x RMS (µm)", "residual RMS (µm)",
+                                         "S(θ̂)x / residual (dB)", band_col], rows,
+        "Response SNR: power of the part of the displacement y that the excitation drives "
+        "through the identified closed loop (full plant, posterior mean) against the rest "
+        "(noise, disturbances, unmodelled response); the SNR a test is planned with. "
+        "S(θ̂)x / residual: how far θ moves the innovation ε against what θ does not "
+        "explain (small by construction: S(θ) is zero at the nominal model); the last "
+        "column counts only the frequencies the likelihood uses.", wrap=(2, 6, 7))],
         figures=fg.data_figures(d, port, band))
     return sec, snr
 
@@ -345,7 +387,7 @@ def discrepancy_section(run: RunData) -> Section:
 def studies_section(run: RunData) -> Section:
     sec = _section("studies")
     for st in run.studies:
-        sec.paragraphs.append(f"Study '{st.name}' ({st.path}): {st.description} "
+        sec.paragraphs.append(f"Study '{st.name}' ({st.path.name}): {st.description} "
                               f"{st.n_rows if st.n_rows is not None else '?'} replicates, "
                               f"seed {st.seed}.")
         sec.bullets += [f"{st.name}: {c}" for c in st.conclusions]
@@ -376,7 +418,7 @@ def provenance_section(run: RunData, argv: list[str]) -> Section:
 
     s = run.summary
     prov = (run.recording.meta.get("provenance") if run.recording is not None else None) or {}
-    bullets = [f"Report command: {shlex.join(argv) if argv else '(Python API)'}",
+    bullets = [f"Report command: {display_argv(argv) if argv else '(Python API)'}",
                f"bayes-amb {__version__} (identification ran with "
                f"{s.get('package_version', '?')}); Python {platform.python_version()}, "
                f"numpy {np.__version__}, arviz {arviz.__version__}, matplotlib "
@@ -386,7 +428,9 @@ def provenance_section(run: RunData, argv: list[str]) -> Section:
                *(f"Study {st.name}: seed {st.seed}" for st in run.studies),
                "Figures of posterior draws use a fixed seed, so the same inputs give the "
                "same report."]
-    rows = [[f.role, str(f.path), f"{f.size:,}", f.sha256] for f in run.inputs]
+    rows = [[f.role, display_path(f.path, run.run_dir), f"{f.size:,}", f.sha256]
+            for f in run.inputs]
     return _section("provenance", bullets=bullets, tables=[Table(
-        "Input files (SHA-256)", ["role", "path", "bytes", "SHA-256"], rows,
+        "Input files (SHA-256); paths relative to the run folder "
+        f"'{run.run_dir.name}'", ["role", "path", "bytes", "SHA-256"], rows,
         mono=(3,), wrap=(0, 1, 3))])
