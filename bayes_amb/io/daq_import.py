@@ -198,7 +198,8 @@ def import_recording(source: str | os.PathLike[str], mapping: str | os.PathLike[
     stages = decimate_stages(m.time.decimate)
     need = 2 if not stages else max(_MIN_STAGE, 2) * int(np.prod(stages[:-1], dtype=int))
     if i1 - i0 < need:
-        raise DataImportError(f"{where}: time: {i1 - i0} samples remain after trimming to "
+        raise DataImportError(f"{where}: time: {max(0, i1 - i0)} samples remain after "
+                              f"trimming to "
                               f"[{m.time.start_s or 0.0!r}, {m.time.stop_s!r}) s of a "
                               f"{n * dt!r} s record; need at least {need}"
                               + (f" to decimate by {m.time.decimate}" if stages else ""))
