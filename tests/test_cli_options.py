@@ -217,3 +217,33 @@ def test_simulate_help_lists_effects_and_parameters():
         assert f"{effect}:" in flat
         for k in params:
             assert f"{k}=" in flat, k
+
+
+# --- a recording without excitation is refused, with the reason ---------------------------
+
+def test_recording_without_excitation_is_refused(tmp_path, capsys):
+    import csv
+
+    from bayes_amb.io.recording import load_recording, require_excitation
+
+    path = tmp_path / "r.csv"
+    assert main(["simulate", "--truth", "reduced", "--dt", "1e-3", "--duration", "0.05",
+                 "-o", str(path)]) == 0
+    require_excitation(load_recording(path))            # the excited recording passes
+    rows = list(csv.reader(path.open(newline="")))
+    eta = [i for i, c in enumerate(rows[0]) if c.startswith("eta_")]
+    assert len(eta) == 4
+    for r in rows[1:]:
+        for i in eta:
+            r[i] = "0"
+    with path.open("w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    capsys.readouterr()
+    expected = f"recording {path}: eta is zero on every channel: nothing to identify from"
+    for argv in (["identify", str(path), "--params", "k_By", "--map-only", "--out",
+                  str(tmp_path / "run")],
+                 ["diagnose", str(path), "--out", str(tmp_path / "diag")]):
+        assert main(argv) == 2
+        out, err = capsys.readouterr()
+        assert (out, err) == ("", f"bayes-amb {argv[0]}: error: {expected}\n")
+    assert not (tmp_path / "run").exists() and not (tmp_path / "diag").exists()
