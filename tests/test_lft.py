@@ -105,27 +105,37 @@ def test_theta_length_is_checked(fm, rig):
 THETAS = [-0.5, -0.25, 0.25, 0.5]
 
 
+# Largest relative eigenvalue error of the reduced 8-state LFT over THETAS at 31500 rpm,
+# measured (commit 24b8027, this machine): k_A* 1.492e-5, k_B* 1.309e-5, c_* 6.71e-7,
+# kxy_A/B 1.39e-7, kxy_D1/D2 1.17e-6. The error is the physics the 8 states leave out, not
+# round-off (the eigenvalues agree to 1e-9 at theta = 0), so it is reproducible to far more
+# than the ~7-10 % margins below; a wrong LFT column, sign or reduction (eqs. 51-52) is off
+# by 1e-3 or more.
+REDUCED_BOUND = {"k": 1.6e-5, "c": 7.5e-7, "kxy": 1.3e-6}
+
+
 @pytest.mark.parametrize("name", list(PARAMETERS))
-def test_reduced_lft_eigenvalues_within_2_percent(rig, name):
+def test_reduced_lft_eigenvalues_match_the_full_model(rig, name):
     """Reduced 8-state LFT against the full model rebuilt from the perturbed rig, 31500
-    rpm, |theta| <= 0.5: max relative eigenvalue error < 2 % (measured <= 1.5e-5 for k_*,
-    <= 7e-7 for c_*, <= 1.2e-6 for kxy_*). For k_* and c_* the error grows with |theta|
-    (second-order effect of the left-out modes), so the check is not round-off."""
+    rpm, |theta| <= 0.5: max relative eigenvalue error below the measured bound of its kind
+    (REDUCED_BOUND). For k_* and c_* the error grows with |theta| (second-order effect of
+    the left-out modes), so the check is not round-off."""
     acc = reduced_eigenvalue_error(rig, name, THETAS, speed_rpm=31500.0)
     assert acc.n_states == 8 and acc.speed_rpm == 31500.0
     assert np.array_equal(acc.thetas, THETAS)
-    assert acc.worst() < 0.02
+    assert acc.worst() < REDUCED_BOUND[get_spec(name).kind]
     if get_spec(name).kind in ("k", "c"):
         err = dict(zip(THETAS, acc.max_rel_error, strict=True))
         assert err[0.5] > err[0.25] > 1e-8 and err[-0.5] > err[-0.25] > 1e-8
 
 
 def test_reduced_accuracy_exact_at_zero_and_with_bending_modes(rig):
-    """theta = 0: reduced eigenvalues equal the full ones (1e-8, eigensolver accuracy);
-    keeping a bending pair (12 states) compares 12 eigenvalues, still < 2 % at 0.5."""
+    """theta = 0: reduced eigenvalues equal the full ones (1e-8, eigensolver accuracy;
+    measured 1.3e-9); keeping a bending pair (12 states) compares 12 eigenvalues: 1.12e-5
+    at k_By = 0.5 (measured), bound 1.3e-5."""
     acc = reduced_eigenvalue_error(rig, "k_By", [0.0, 0.5], n_bending=1)
     assert acc.n_states == 12
-    assert acc.max_rel_error[0] < 1e-8 and acc.max_rel_error[1] < 0.02
+    assert acc.max_rel_error[0] < 1e-8 and 1e-8 < acc.max_rel_error[1] < 1.3e-5
 
 
 @pytest.mark.parametrize(("name", "thetas", "match"), [

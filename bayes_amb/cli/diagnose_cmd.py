@@ -27,8 +27,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                         "physics)")
     add_prior_options(p)
     p.add_argument("--effects", default=",".join(VOCABULARY), metavar="NAMES",
-                   help="effects to try, comma-separated, of " + ", ".join(VOCABULARY)
-                   + " (default: all)")
+                   help="effects to try, comma-separated (default " + ",".join(VOCABULARY)
+                   + ", i.e. all)")
     p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
                    help="log Bayes factor above which an effect is accepted, >= 0 (default 3)")
     p.add_argument("--max-effects", type=integer(0), default=3, metavar="N",

@@ -12,6 +12,7 @@ import re
 import sys
 
 from bayes_amb import __version__
+from bayes_amb.cli.common import one_line
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.threads import ENV_VAR as THREADS_ENV
 from bayes_amb.threads import configure_process
@@ -31,7 +32,7 @@ class _OneLineParser(argparse.ArgumentParser):
         self._negative_number_matcher = _NEGATIVE_NUMBER
 
     def error(self, message: str) -> None:  # type: ignore[override]
-        sys.stderr.write(f"{self.prog}: error: {message}\n")
+        sys.stderr.write(one_line(f"{self.prog}: error: {message}") + "\n")
         raise SystemExit(2)
 
 
@@ -98,11 +99,11 @@ def main(argv: list[str] | None = None) -> int:
     try:
         return int(args.func(args) or 0)
     except BayesAmbError as exc:
-        sys.stderr.write(f"bayes-amb {args.command}: error: {exc}\n")
+        sys.stderr.write(one_line(f"bayes-amb {args.command}: error: {exc}") + "\n")
         return 2
     except OSError as exc:
-        sys.stderr.write(f"bayes-amb {args.command}: error: {exc.filename or ''}: "
-                         f"{exc.strerror or exc}\n")
+        sys.stderr.write(one_line(f"bayes-amb {args.command}: error: {exc.filename or ''}: "
+                                  f"{exc.strerror or exc}") + "\n")
         return 2
     except KeyboardInterrupt:                 # Ctrl-C outside a study's own handling
         sys.stderr.write(f"bayes-amb {args.command}: interrupted\n")

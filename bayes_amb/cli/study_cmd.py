@@ -6,7 +6,7 @@ import argparse
 import shlex
 import sys
 
-from bayes_amb.cli.common import emit
+from bayes_amb.cli.common import emit, one_line
 from bayes_amb.cli.options import integer
 from bayes_amb.errors import StudyInterrupted
 from bayes_amb.studies import finalise, load_study, run_study
@@ -47,9 +47,9 @@ def run(args: argparse.Namespace) -> int:
                          scheduler=args.scheduler,
                          progress=not (args.no_progress or args.json))
     except StudyInterrupted as exc:
-        sys.stderr.write(f"bayes-amb study: {exc}; resume with: bayes-amb study "
-                         f"{shlex.quote(args.study)} --out {shlex.quote(args.out)} "
-                         "--resume\n")
+        sys.stderr.write(one_line(f"bayes-amb study: {exc}; resume with: bayes-amb study "
+                                  f"{shlex.quote(args.study)} --out "
+                                  f"{shlex.quote(args.out)} --resume") + "\n")
         return exc.exit_status
     manifest = finalise(spec, rows, args.out)
     if not args.no_figures:
