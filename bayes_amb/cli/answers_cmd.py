@@ -25,10 +25,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--speeds", default=None, metavar="RPM,RPM,...", help="speeds of the "
                    "mode table (default 0.8, 0.9, 1.0, 1.05 x the recording's speed)")
     p.add_argument("--model", choices=("full", "reduced"), default="full",
-                   help="plant the draws are put into (default: full FE model)")
+                   help="plant the draws are put into: full (the FE model) or reduced "
+                   "(default: full)")
     p.add_argument("--out", default=None, metavar="FILE.json", help="also write the result "
-                   "as JSON (atomically)")
-    p.add_argument("--json", action="store_true", help="print JSON")
+                   "as JSON, atomically (default: not written)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 

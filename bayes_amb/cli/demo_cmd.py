@@ -28,7 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--import-formats", action="store_true",
                    help="only the import step: export a simulated recording to .mat v5, "
                    ".mat v7.3, TDMS, HDF5 and CSV with a channel map in volts, import and "
-                   "identify each, import a MATLAB-style PID (OUT/import_demo.json)")
+                   "identify each, import a MATLAB-style PID (OUT/import_demo.json; default: the "
+                   "full demo)")
     p.add_argument("--json", action="store_true",
                    help="print the results as JSON (default: text)")
     p.set_defaults(func=run)

@@ -22,11 +22,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "with provenance (sha256 of source and map, the map itself).")
     p.add_argument("source", help="the DAQ file")
     p.add_argument("--map", required=True, metavar="MAP.toml", help="the channel map")
-    p.add_argument("--rig", default=None, help="rig file (overrides recording.rig of the map)")
+    p.add_argument("--rig", default=None, help="rig file (default: recording.rig of the map)")
     p.add_argument("--controller", default=None,
-                   help="controller file (overrides recording.controller of the map)")
-    p.add_argument("-o", "--output", required=True, metavar="NAME.csv")
-    p.add_argument("--json", action="store_true", help="print JSON")
+                   help="controller file (default: recording.controller of the map)")
+    p.add_argument("-o", "--output", required=True, metavar="NAME.csv",
+                   help="the canonical recording to write (NAME.json beside it)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
     try:
         ctl = importlib.import_module("bayes_amb.cli.import_controller_cmd")

@@ -18,17 +18,23 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "ISO 14839-3 zone and write a generic controller file.")
     p.add_argument("source", help="the .mat file")
     p.add_argument("--dt", type=float, default=None,
-                   help="sample time in s (required for Ts = 0; else must equal Ts)")
+                   help="sample time in s (required for Ts = 0; else must equal Ts; "
+                   "default: Ts)")
     p.add_argument("--method", choices=DISCRETISATION_METHODS, default="tustin",
-                   help="discretisation of a continuous controller (default tustin)")
-    p.add_argument("--prewarp-hz", type=float, default=None, help="Tustin prewarp frequency")
+                   help="discretisation of a continuous controller: "
+                   + ", ".join(DISCRETISATION_METHODS)
+                   + " (default tustin)")
+    p.add_argument("--prewarp-hz", type=float, default=None,
+                   help="Tustin prewarp frequency in Hz (default: none)")
     p.add_argument("--feedback", choices=("negative", "positive"), default="negative",
-                   help="u = -K y (MATLAB convention, default) or u = +K y")
+                   help="negative: u = -K y (MATLAB convention) or positive: u = +K y (default "
+                   "negative)")
     p.add_argument("--rig", default=None, help="rig TOML file (default: the reference rig)")
     p.add_argument("--speed-rpm", type=float, default=None,
                    help="speed of the stability check (default: nominal)")
-    p.add_argument("-o", "--output", required=True, metavar="CONTROLLER.json")
-    p.add_argument("--json", action="store_true", help="print JSON")
+    p.add_argument("-o", "--output", required=True, metavar="CONTROLLER.json",
+                   help="the controller file to write")
+    p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
 

@@ -60,6 +60,7 @@ from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.io.atomic import json_text, write_netcdf_atomic, write_text_atomic
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
+from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import parse_param_list
 
 
@@ -204,6 +205,7 @@ def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
         f["test"] not in ("floor", "whiteness") for f in loc.findings) else "no mismatch"
 
 
+@limited_threads
 def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | None = None,
              priors: dict[str, Prior] | None = None,
              options: DiagnoseOptions | None = None) -> Diagnosis:
