@@ -55,10 +55,19 @@ def sensitivity(Ap: NDArray, Bp: NDArray, Cp: NDArray, K: tuple[NDArray, ...], d
     Each axis' value is the diagonal element of (I - G K)^-1 with the other loops closed, as
     a sensitivity measured on a rig by injecting on one axis (ISO 14839-3).
     """
+    w, z = sensitivity_grid(dt, n_freq)
+    return sensitivity_from_response(w, ss_freqresp(Ap, Bp, Cp, None, z), ss_freqresp(*K, z))
+
+
+def sensitivity_grid(dt: float, n_freq: int = 600) -> tuple[NDArray, NDArray]:
+    """The sensitivity's frequency grid: w (rad/s, 1 Hz to Nyquist, log) and z = e^{j w dt}."""
     w = np.logspace(np.log10(2 * np.pi * 1.0), np.log10(np.pi / dt), n_freq)
-    z = np.exp(1j * w * dt)
-    G = ss_freqresp(Ap, Bp, Cp, None, z)
-    Kz = ss_freqresp(*K, z)
+    return w, np.exp(1j * w * dt)
+
+
+def sensitivity_from_response(w: NDArray, G: NDArray, Kz: NDArray) -> SensitivityData:
+    """Per-axis sensitivity from the plant and controller responses G, Kz (nf, 4, 4) on the
+    grid w: the diagonal of (I - G K)^-1, its peaks and the ISO 14839-3 zone."""
     S = np.linalg.inv(np.eye(G.shape[1])[None] - G @ Kz)
     mag = np.abs(np.diagonal(S, axis1=1, axis2=2))
     peaks = mag.max(axis=0)

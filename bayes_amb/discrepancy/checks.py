@@ -29,17 +29,15 @@ pole of the nominal loop (decay to 1e-3).
 
 from __future__ import annotations
 
-import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
 from scipy.signal import detrend
 
-from bayes_amb.errors import BayesAmbError
-from bayes_amb.io.recording import Recording
+from bayes_amb.discrepancy.locate import _coherence
+from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
 
 CONTROLLER_TOL = 1e-4
@@ -137,12 +135,9 @@ def _batch_se(v: NDArray, n_batches: int = 20) -> NDArray:
 
 def check_excitation(rec: Recording) -> Check:
     """Which excitation channels carry a signal; refuses a recording with none."""
+    require_excitation(rec)
     rms = {g: np.sqrt(np.mean(np.asarray(v) ** 2, axis=0)) for g, v in rec.excitation.items()}
     live = {g: [c for c, r in zip(CHANNELS, v, strict=True) if r > 0] for g, v in rms.items()}
-    if not any(live.values()):
-        groups = "/".join(rec.excitation)
-        raise BayesAmbError(f"recording {rec.source}: field {groups}: the excitation is zero on "
-                            "every channel: nothing to identify from")
     parts = [f"{g} on {','.join(ch)} (rms {np.max(rms[g]):.3g})" for g, ch in live.items() if ch]
     return Check("excitation", True, "excitation present: " + "; ".join(parts),
                  {"rms": {g: [float(x) for x in v] for g, v in rms.items()}})
@@ -151,23 +146,16 @@ def check_excitation(rec: Recording) -> Check:
 def _coherent_share(d: NDArray, x: NDArray, u: NDArray, min_bins: int = 32
                     ) -> tuple[float, float]:
     """Share of the power of u that a per-band linear regression of d on the excitation x
-    explains, and the smallest Holm-adjusted F-test p-value of that regression."""
+    explains (locate's coherence F-test, bands of >= min_bins bins), and the smallest
+    Bonferroni-adjusted p-value of that regression."""
     D, X = np.fft.rfft(d, axis=0)[1:], np.fft.rfft(x, axis=0)[1:]
     U = np.fft.rfft(u - u.mean(axis=0), axis=0)[1:]
-    m = X.shape[1]
-    n_b = max(1, D.shape[0] // max(min_bins, 2 * m + 2))
-    edges = np.linspace(0, D.shape[0], n_b + 1).astype(int)
-    p, expl = [], 0.0
-    for lo, hi in itertools.pairwise(edges):
-        Xb, Db = X[lo:hi], D[lo:hi]
-        beta, *_ = np.linalg.lstsq(Xb, Db, rcond=None)
-        fit = Xb @ beta
-        ss1 = np.sum(np.abs(Db - fit) ** 2, axis=0)
-        ss0 = np.sum(np.abs(Db) ** 2, axis=0)
-        F = ((ss0 - ss1) / m) / np.maximum(ss1 / (hi - lo - m), 1e-300)
-        p.append(stats.f.sf(F, 2 * m, 2 * (hi - lo - m)))
-        expl += float(np.sum(np.abs(fit) ** 2))
-    p_adj = float(np.min(np.minimum(1.0, np.concatenate(p) * len(p) * 4)))
+    n_b = max(1, D.shape[0] // max(min_bins, 2 * X.shape[1] + 2))
+    bands = np.array_split(np.arange(D.shape[0]), n_b)
+    coh, p = _coherence(D, X, bands)
+    ss0 = np.array([np.sum(np.abs(D[b]) ** 2, axis=0) for b in bands])
+    expl = float(np.sum(coh * ss0))              # least squares: ss0 - ss1 = |fit|^2
+    p_adj = float(min(1.0, p.min() * p.size))
     return expl / max(float(np.sum(np.abs(U) ** 2)), 1e-300), p_adj
 
 

@@ -161,10 +161,9 @@ class RobustWhittle(WhittleLikelihood):
         P = np.atleast_2d(theta)
         Y, stable = self.prediction_dft(P)
         R = self.E[None] - Y
-        fwd: ExtendedForwardModel = self.forward  # type: ignore[assignment]
-        for c, basis in zip(fwd.line_candidates, self.lines, strict=True):
-            ab = P[:, fwd.slices[fwd.candidates.index(c)]]             # (nb, 2)
-            R = R - np.einsum("kcj,bj->bkc", basis, ab)
+        lines, coef = self._line_terms(P)
+        if lines is not None:
+            R = R - np.einsum("kcl,bl->bkc", lines, coef)
         return R, stable
 
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
