@@ -1,8 +1,11 @@
 """Exceptions for user-facing errors.
 
 Every error a user can cause (a bad file, an unknown name, a value out of range) is one of
-these. The CLI turns them into a single line on stderr and exit status 2.
+these. The CLI turns them into a single line on stderr (:func:`one_line`) and exit status 2.
+No heavy imports here: the CLI imports this before it sets the BLAS thread limits.
 """
+
+import unicodedata
 
 
 class BayesAmbError(ValueError):
@@ -59,3 +62,16 @@ class StudyInterrupted(KeyboardInterrupt):
 class DataImportError(BayesAmbError):
     """A foreign DAQ file, its channel map or an imported controller is missing, malformed
     or inconsistent."""
+
+
+def one_line(text: str) -> str:
+    """``text`` with control characters escaped (a path or value holding a newline, a
+    carriage return or a NUL must not break an error message over several lines).
+
+    Examples
+    --------
+    >>> one_line("rig file a\\nb.toml: not found")
+    'rig file a\\\\nb.toml: not found'
+    """
+    return "".join(repr(c)[1:-1] if unicodedata.category(c) in ("Cc", "Zl", "Zp") else c
+                   for c in text)

@@ -115,3 +115,12 @@ def test_cli_benchmark_environments_differ_only_in_the_thread_variables(variant)
     added = {"default": {}, "variable": {"OPENBLAS_NUM_THREADS": "1"},
              "unprotected": {ENV_VAR: "0"}}[variant]
     assert env == {"PATH": "/bin", "PYTHONPATH": "/src", **added}
+
+
+def test_the_cli_module_does_not_load_numpy_before_the_thread_limit():
+    """OpenBLAS reads its thread variables when it is loaded: main() sets them, so importing
+    the CLI entry point must not load numpy (and with it BLAS) first."""
+    code = "import sys, bayes_amb.cli.main; print('numpy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True)
+    assert out.stdout.strip() == "False"

@@ -4,10 +4,11 @@ from __future__ import annotations
 
 import json
 import sys
-import unicodedata
 from typing import Any
 
 import numpy as np
+
+from bayes_amb.errors import one_line  # noqa: F401  (re-exported for the commands)
 
 
 def to_jsonable(obj: Any) -> Any:
@@ -27,19 +28,6 @@ def to_jsonable(obj: Any) -> Any:
     if isinstance(obj, np.floating):
         return float(obj)
     return obj
-
-
-def one_line(text: str) -> str:
-    """``text`` with control characters escaped (a path or value holding a newline, a
-    carriage return or a NUL must not break an error message over several lines).
-
-    Examples
-    --------
-    >>> one_line("rig file a\\nb.toml: not found")
-    'rig file a\\\\nb.toml: not found'
-    """
-    return "".join(repr(c)[1:-1] if unicodedata.category(c) in ("Cc", "Zl", "Zp") else c
-                   for c in text)
 
 
 def emit(data: dict[str, Any], text: str, as_json: bool) -> None:

@@ -12,8 +12,7 @@ import re
 import sys
 
 from bayes_amb import __version__
-from bayes_amb.cli.common import one_line
-from bayes_amb.errors import BayesAmbError
+from bayes_amb.errors import BayesAmbError, one_line
 from bayes_amb.threads import ENV_VAR as THREADS_ENV
 from bayes_amb.threads import configure_process
 
