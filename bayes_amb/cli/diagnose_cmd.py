@@ -59,6 +59,10 @@ def format_report(r: dict) -> str:
              + (f"; time {mm['time_s'][0]:.2f}-{mm['time_s'][1]:.2f} s" if mm["time_s"]
                 else "")
              + f" (evidence {mm['evidence']['strength']})"]
+    noise = sorted({f["test"] for f in mm.get("noise_findings", [])})
+    if noise:
+        lines.append(f"noise         : {' and '.join(noise)} tests fail (the noise is not the "
+                     "loop noise model's: a habit, not a mismatch)")
     if r["explanations"]:
         for e in r["explanations"]:
             ps = ", ".join(f"{k} {v['map']:.4g} [{v['hdi90'][0]:.4g}, {v['hdi90'][1]:.4g}] "

@@ -201,8 +201,7 @@ def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
         return "partly explained" if accepted else "unexplained"
     if accepted:
         return "explained"
-    return "mismatch, unexplained" if loc.detected and any(
-        f["test"] not in ("floor", "whiteness") for f in loc.findings) else "no mismatch"
+    return "mismatch, unexplained" if loc.detected else "no mismatch"
 
 
 @limited_threads

@@ -40,6 +40,21 @@ def _unexplained(report: dict[str, Any]) -> str:
             + tail)
 
 
+def _noise(mm: dict[str, Any]) -> str:
+    """A sentence on the noise findings (floor, whiteness): a habit, not a mismatch."""
+    nf = mm.get("noise_findings") or []
+    if not nf:
+        return ""
+    floor = [f["band_hz"] for f in nf if f["test"] == "floor"]
+    white = sorted({c for f in nf if f["test"] == "whiteness" for c in f["channels"]})
+    parts = ([f"residual power above the loop noise model in {_bands(floor)}"] if floor
+             else []) + ([f"non-white residual on {', '.join(white)}"] if white else [])
+    return ("The noise is not as the loop noise model has it (" + "; ".join(parts) + "): "
+            "coloured sensor noise or a band-limited disturbance, a habit of the record. "
+            "The likelihood integrates each band's noise spectrum out, so this is not "
+            "counted as a mismatch.")
+
+
 def plain_language(report: dict[str, Any]) -> str:
     """One paragraph from the numbers of a diagnosis.json report."""
     mm = report["mismatch"]
@@ -54,11 +69,13 @@ def plain_language(report: dict[str, Any]) -> str:
     prefix = ("Record habits handled as nuisance, not physics: " + "; ".join(habits) + ". "
               if habits else "")
     unexpl = _unexplained(report)
+    noise = _noise(mm)
     if not mm["detected"] and not expl:
-        return prefix + ("No mismatch: the residual of the nominal model is consistent with the "
-                "fitted noise (no excitation-coherent band, no line, whiteness and "
-                f"cross-correlation tests pass at a family-wise {100 * mm['evidence']['alpha']:g} "
-                "% level), and no candidate physics improves the fit enough to be named.")
+        return prefix + ("No mismatch: the residual of the nominal model holds no structure "
+                "physics could leave (no excitation-coherent band, no line at 1x, no "
+                "cross-correlation with the excitation, no change over time, at a family-wise "
+                f"{100 * mm['evidence']['alpha']:g} % level), and no candidate physics "
+                "improves the fit enough to be named." + (" " + noise if noise else ""))
     where = (f"on channel(s) {', '.join(mm['channels'])}"
              + (f", in {_bands(mm['bands_hz'])}" if mm["bands_hz"] else "")
              + (f", between {mm['time_s'][0]:.2f} and {mm['time_s'][1]:.2f} s"
@@ -96,9 +113,9 @@ def plain_language(report: dict[str, Any]) -> str:
             text.append(f"With the nominal model {', '.join(bound)} sat on its prior bound, "
                         "absorbing the missing physics; with it added it no longer does.")
     elif not unexpl:
-        text.append("None of the candidate physics (actuator lag, time delay, cross-coupling, "
-                    "flexible modes, unbalance, sensor gain) explains it, and what is left is "
-                    "not coherent with the excitation: the noise is not as modelled.")
+        text.append("None of the candidate physics in the library explains it.")
     if unexpl:
         text.append(unexpl)
+    if noise:
+        text.append(noise)
     return " ".join(text)

@@ -334,13 +334,16 @@ def discrepancy_section(run: RunData) -> Section:
              f"{g(mm['time_s'][0])}–{g(mm['time_s'][1])} s"],
             ["evidence", str(mm.get("evidence", {}).get("strength", "–"))]]
     tables.append(Table("Where the nominal model fails", ["", ""], rows, compact=True))
-    if mm.get("findings"):
+    found = ([(f, f["test"]) for f in mm.get("findings", [])]
+             + [(f, f"{f['test']} (noise, not a mismatch)")
+                for f in mm.get("noise_findings", [])])
+    if found:
         tables.append(Table("Location tests (Holm-adjusted, family-wise 1 %)",
                             ["test", "band (Hz)", "channels", "adjusted p"],
-                            [[f["test"], "–" if "band_hz" not in f else
+                            [[name, "–" if "band_hz" not in f else
                               f"{g(f['band_hz'][0])}–{g(f['band_hz'][1])}",
                               ", ".join(f.get("channels", [])), g(f["p_adjusted"], 2)]
-                             for f in mm["findings"][:20]]))
+                             for f, name in found[:20]]))
     if dg.get("explanations"):
         tables.append(Table("Named physics (posterior of its parameters)",
                             ["effect", "location", "parameter", "mean", "90 % HDI", "unit",
