@@ -55,11 +55,11 @@ def nominal_rec(rig, ctrl):
 
 
 def test_family_covers_the_vocabulary_and_shares_one_interface():
-    cands = all_candidates()
+    cands = all_candidates(representatives=False)
     assert {c.effect for c in cands} == set(VOCABULARY)
     assert len({c.key for c in cands}) == len(cands)
     hooks = ("params", "lft_names", "n_bending", "modal", "continuous", "discretise",
-             "structure", "discrete", "line_force", "physical", "describe")
+             "structure", "discrete", "line_force", "line_output", "physical", "describe")
     for c in cands:
         assert isinstance(c, Candidate) and c.fingerprint
         for h in hooks:                       # same signature as the base class
@@ -67,7 +67,8 @@ def test_family_covers_the_vocabulary_and_shares_one_interface():
                 getattr(Candidate, h).__code__.co_argcount, (c.key, h)
 
 
-@pytest.mark.parametrize("cand", [c for c in all_candidates() if c.effect != "flexible_mode"],
+@pytest.mark.parametrize("cand", [c for c in all_candidates(representatives=False)
+                                  if c.effect != "flexible_mode"],
                          ids=lambda c: c.key)
 def test_candidate_at_its_null_is_the_nominal_model(nominal_rec, cand):
     nom = ExtendedForwardModel(nominal_rec, ("k_By", "c_By"))

@@ -56,7 +56,10 @@ def _gamma(A: np.ndarray, B: np.ndarray, t: float) -> tuple[np.ndarray, np.ndarr
 def reference_closed_loop(tp: TruthPlant, K: tuple, dt: float) -> ct.StateSpace:
     """Discrete closed loop of Fig. 2 built by hand, states [x; x_k; u_p[k-1..k-m-1]].
 
-    Inputs [eta (4); n (4); r1 (4); r2 (4); f (2: sampled unbalance force, held)],
+    Inputs [eta (4); n (4); r1 (4); r2 (4); Re c, Im c (4)] with the continuous unbalance
+    force f(t) = Re(c_k e^{j w (t - t_k)}) over sample k, integrated exactly: its term is
+    Re(G_w c_k), G_w = int_0^dt e^{A (dt - s)} B_f e^{j w s} ds (the top-right block of
+    expm([[A, B_f], [0, j w I]] dt), complex),
     outputs [y (4); u (4); eps (4)]. The input delay tau = m dt + phi enters as
     x+ = e^{A dt} x + Gamma(dt - phi) u_p[k-m] + e^{A(dt-phi)} Gamma(phi) u_p[k-m-1].
     """
@@ -69,10 +72,10 @@ def reference_closed_loop(tp: TruthPlant, K: tuple, dt: float) -> ct.StateSpace:
     E1, G_now = _gamma(A, B, dt - phi)
     G_prev = E1 @ _gamma(A, B, phi)[1]
     nh = nu * (m + 1)
-    N, n_in = n + nk + nh, 18
+    N, n_in = n + nk + nh, 20
     sx, sk = slice(0, n), slice(n, n + nk)
     ie, i_n, i1, i2, i_f = (slice(0, 4), slice(4, 8), slice(8, 12), slice(12, 16),
-                            slice(16, 18))
+                            slice(16, 20))
 
     def h(j: int) -> slice:
         return slice(n + nk + (j - 1) * nu, n + nk + j * nu)
@@ -98,7 +101,11 @@ def reference_closed_loop(tp: TruthPlant, K: tuple, dt: float) -> ct.StateSpace:
         Acl[sx, h(m)] += G_now
     Acl[sx, h(m + 1)] += G_prev
     if tp.B_f is not None:
-        Bcl[sx, i_f] = _gamma(A, tp.B_f, dt)[1]
+        w = tp.speed_rpm * 2 * np.pi / 60
+        M = np.zeros((n + 2, n + 2), dtype=complex)
+        M[:n, :n], M[:n, n:], M[n:, n:] = A, tp.B_f, 1j * w * np.eye(2)
+        G_w = sla.expm(M * dt)[:n, n:]
+        Bcl[sx, i_f] = np.hstack([G_w.real, -G_w.imag])
     Acl[sk] = Bk @ v_s
     Acl[sk, sk] += Ak
     Bcl[sk] = Bk @ v_i
@@ -106,7 +113,7 @@ def reference_closed_loop(tp: TruthPlant, K: tuple, dt: float) -> ct.StateSpace:
     for j in range(2, m + 2):
         Acl[h(j), h(j - 1)] = np.eye(nu)
     Ccl = np.vstack([v_s[:4], out_s])
-    Dcl = np.vstack([v_i[:4] - np.hstack([np.zeros((4, 8)), np.eye(4), np.zeros((4, 6))]),
+    Dcl = np.vstack([v_i[:4] - np.hstack([np.zeros((4, 8)), np.eye(4), np.zeros((4, 8))]),
                      out_i])                                # recorded y excludes r1
     return ct.ss(Acl, Bcl, Ccl, Dcl, dt)
 
@@ -154,9 +161,10 @@ def test_simulate_loop_matches_python_control(delay_samples, unbalance):
     noise, r1, r2 = (s * rng.standard_normal((n, 4)) for s in (1e-3, 2e-3, 0.3))
     if unbalance:
         wt = tp.speed_rpm * 2 * np.pi / 60 * np.arange(n) * dt + tp.unbalance[1]
-        f = tp.unbalance[0] * np.column_stack([np.cos(wt), np.sin(wt)])
+        c = tp.unbalance[0] * np.exp(1j * wt)[:, None] * np.array([1.0, -1j])
+        f = np.hstack([c.real, c.imag])
     else:
-        f = np.zeros((n, 2))
+        f = np.zeros((n, 4))
     sig = simulate_loop(tp, K, dt, eta, noise=noise, r1=r1, r2=r2)
     assert not sig.unstable
     resp = ct.forced_response(sys, U=np.hstack([eta, noise, r1, r2, f]).T)

@@ -16,9 +16,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("diagnose", help="locate and explain model discrepancy",
                        description="Fit the nominal model over the whole band, locate where "
                        "its residual fails (channels, bands, time), try the library of "
-                       "candidate physics (" + ", ".join(VOCABULARY) + "), accept effects "
-                       "greedily by Bayes factor and compare the fit before and after. "
-                       "Writes DIR/diagnosis.json, DIR/residuals.nc and DIR/models/*.nc.")
+                       "candidate physics (" + ", ".join(VOCABULARY) + "; `bayes-amb "
+                       "library` lists them with parameters, units, priors and "
+                       "equivalences), accept effects greedily by Bayes factor and compare "
+                       "the fit before and after. Writes DIR/diagnosis.json, "
+                       "DIR/residuals.nc and DIR/models/*.nc.")
     p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
     p.add_argument("--params", default=None, metavar="NAMES",
                    help="stiffness/damping parameters kept in every model, comma-separated "
@@ -99,7 +101,7 @@ def run(args: argparse.Namespace) -> int:
         raise BayesAmbError(f"option --effects: unknown effect {unknown[0] if unknown else ''!r};"
                             f" known: {', '.join(VOCABULARY)}")
     rec = load_recording(args.recording)
-    cands = tuple(c for c in all_candidates() if c.effect in wanted)
+    cands = all_candidates(wanted)
     quiet = args.no_progress or args.json
 
     def say(text: str) -> None:

@@ -7,20 +7,28 @@ out, model it, and show the fit improve.
     d.save("runs/diag")               # diagnosis.json, residuals.nc, models/*.nc
 """
 
-from bayes_amb.discrepancy.candidates import (
+from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
+from bayes_amb.discrepancy.library import (
+    REGISTRY,
     VOCABULARY,
+    Actuator2nd,
+    ActuatorGain,
     ActuatorLag,
     Candidate,
     CrossCoupling,
     FlexibleMode,
+    Runout,
+    SensorDelay,
     SensorGain,
+    SensorLag,
     TimeDelay,
     Unbalance,
     all_candidates,
+    library_table,
 )
-from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
 
-__all__ = ["VOCABULARY", "ActuatorLag", "Candidate", "CrossCoupling", "DiagnoseOptions",
-           "Diagnosis", "FlexibleMode", "LocateOptions", "Location", "SensorGain", "TimeDelay",
-           "Unbalance", "all_candidates", "diagnose", "locate"]
+__all__ = ["REGISTRY", "VOCABULARY", "Actuator2nd", "ActuatorGain", "ActuatorLag", "Candidate",
+           "CrossCoupling", "DiagnoseOptions", "Diagnosis", "FlexibleMode", "LocateOptions",
+           "Location", "Runout", "SensorDelay", "SensorGain", "SensorLag", "TimeDelay",
+           "Unbalance", "all_candidates", "diagnose", "library_table", "locate"]

@@ -256,7 +256,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     explanations = []
     for fm, eff in zip(sel.accepted, effects, strict=True):
         cand = fm.candidates[-1]
-        explanations.append({**eff, "score": fm.log_bf,
+        explanations.append({**eff, "title": cand.entry.title, "side": cand.entry.side,
+                             "score": fm.log_bf,
                              "kind": "model" if cand.nominal_family else "physics",
                              "equivalence_class": [cand.key, *cand.equivalents()],
                              "confidence": confidence,

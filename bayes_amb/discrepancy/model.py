@@ -6,9 +6,10 @@ rows is built as
 
     A0  = nominal reduced A (with the bending pairs the candidates ask for), modal hooks
     A   = A0 + B_w Theta C_z        (LFT, eqs. 51-52; cross-coupling adds kxy_* columns)
-    (A, B, C) -> continuous hooks   (actuator lag adds lag states)
+    (A, B, C) -> continuous hooks   (actuator and sensor dynamics add states, ki gain)
     sampled exactly (ZOH, or a candidate's own sampling: fractional delay line)
     (Ad, Bd, Cd) -> discrete hooks  (sensor gain)
+    + synchronous lines             (unbalance force, runout on the measurement)
 
 and closed with the recorded controller and the nominal dual-Youla filter (loop_model.py),
 so that the map x -> eps and the noise filters of eq. 14 are exact for the extended plant.
@@ -20,9 +21,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.typing import NDArray
 
-from bayes_amb.control.discrete import zoh
-from bayes_amb.discrepancy.candidates import Candidate, EffectParam, ModelContext
-from bayes_amb.inference.batched import zoh_batched
+from bayes_amb.discrepancy.library import Candidate, EffectParam, ModelContext
+from bayes_amb.inference.batched import expm_batched, zoh_batched
 from bayes_amb.inference.forward import ForwardModel, ModalBatch, diagonalise
 from bayes_amb.inference.loop_model import loop_matrices
 from bayes_amb.inference.priors import Prior, PriorSet, default_prior
@@ -101,7 +101,8 @@ class ExtendedForwardModel(ForwardModel):
             + [e.prior for e in eff]))
         self.null = np.array([0.0] * len(self.theta_names) + [e.null for e in eff])
         self.line_candidates = tuple(c for c in self.candidates
-                                     if c.line_force(self.ctx) is not None)
+                                     if c.line_force(self.ctx) is not None
+                                     or c.line_output(self.ctx) is not None)
 
     # ------------------------------------------------------------------ plants
     def phi(self, P: NDArray, i: int) -> NDArray:
@@ -214,14 +215,16 @@ class ExtendedForwardModel(ForwardModel):
 
     # ------------------------------------------------------------------ lines
     def line_responses(self, P_ref: NDArray) -> list[NDArray]:
-        """For each line candidate, the eps response (N, 4, 2) to its two basis forces per
+        """For each line candidate, the eps response (N, 4, 2) to its two basis signals per
         unit of its parameters (a: cos, b: sin phase) through the loop of this model at
         the parameters P_ref (so a lag, delay or gain of the same model acts on it too).
 
-        The force acts on the mechanical states only (not through lag or delay states)
-        and is sampled and held (ZOH).
+        A force line (unbalance) acts on the plant states (not through actuator or delay
+        states) as the continuous sinusoid it is: over a sample, exactly
+        x+ = Ad x + (A - j w I)^-1 (Ad - e^{j w dt} I) B_f F e^{j w t_k}. A measurement
+        line (runout) is added to the sampled measurement, where sensor noise enters.
         """
-        out = []
+        out: list[NDArray] = []
         if not self.line_candidates:
             return out
         P = np.atleast_2d(np.asarray(P_ref, dtype=float))[:1]
@@ -231,22 +234,36 @@ class ExtendedForwardModel(ForwardModel):
         t = np.arange(self.x.shape[0])
         w = self.ctx.omega_rot
         z0 = np.exp(1j * w * self.dt)
-        A_cl, _, C_cl, _ = loop_matrices(self.parts, Ad, Bd, Cd)
-        A_cl, C_cl = A_cl[0], C_cl[0]
+        A_cl, B_cl, C_cl, D_cl = loop_matrices(self.parts, Ad, Bd, Cd)
+        A_cl, B_cl, C_cl = A_cl[0], B_cl[0], C_cl[0]
         lam, V = np.linalg.eig(A_cl)
         cm = C_cl @ V                                                  # (4, ns)
+        Ac = A[0]
+        Adc = expm_batched(A[:1] * self.dt)[0]
         for c in self.line_candidates:
-            Bf = self.base.T_L @ c.line_force(self.ctx)
-            _, Bfd = zoh(A[0], Bf, self.dt)
-            Bcl = np.zeros((A_cl.shape[0], 2))
-            Bcl[:n] = Bfd                                              # plant states first
-            bm = np.linalg.solve(V, Bcl.astype(complex))               # (ns, 2)
-            # response from rest to f[k] = F z0^k:  sum_i c_i b_i (lam_i^k - z0^k)/(lam_i - z0);
-            # in steady state (forcing since long before the record) the lam^k term is absent
+            Bf = c.line_force(self.ctx)
+            if Bf is not None:
+                Bf = self.base.T_L @ Bf
+                Bf = np.vstack([Bf, np.zeros((n - Bf.shape[0], 2))])  # added states last
+                Gw = np.linalg.solve(Ac - 1j * w * np.eye(n), (Adc - z0 * np.eye(n)) @ Bf)
+                Bcl = np.zeros((A_cl.shape[0], 2), dtype=complex)
+                Bcl[:n] = Gw                                           # plant states first
+                Dcl = np.zeros((4, 2))
+                F = w**2 * c.UNIT * np.array([1.0, -1j])               # a = 1: x cos, y sin
+            else:
+                e = c.line_output(self.ctx)                            # (4,) channels
+                # the measurement input of the loop is the sensor-noise port
+                Bcl = (B_cl[:, 4:8] @ e)[:, None].astype(complex)
+                Dcl = (D_cl[:, 4:8] @ e)[:, None]
+                F = c.UNIT * np.array([1.0])
+            bm = np.linalg.solve(V, Bcl)                               # (ns, k)
+            # response from rest to s[k] = F z0^k:  sum_i c_i b_i (lam_i^k - z0^k)/(lam_i - z0)
+            # plus the direct term; in steady state (line since long before the record) the
+            # lam^k term is absent
             lk = (lam[None, :] ** t[:, None] if c.start == "rest"
                   else np.zeros((t.size, lam.size)))
             g = (lk - (z0 ** t)[:, None]) / (lam - z0)[None, :]
-            F = w**2 * c.UNIT * np.array([1.0, -1j])                   # a = 1: x cos, y sin
             resp = (g * (bm @ F)[None, :]) @ cm.T                      # (N, 4) complex
+            resp = resp + (z0 ** t)[:, None] * (Dcl @ F)[None, :]
             out.append(np.stack([resp.real, -resp.imag], axis=2))   # Re((a + jb) resp)
         return out

@@ -37,7 +37,8 @@ import scipy.optimize as so
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayes_amb.discrepancy.candidates import Candidate, Unbalance, all_candidates
+from bayes_amb.discrepancy.candidates import Candidate, SynchronousLine, all_candidates
+from bayes_amb.discrepancy.library.registry import admissible
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference.estimate import LogPosterior, find_map, hessian_covariance, local_search
@@ -313,7 +314,7 @@ def _try(current: FittedModel, pool: list[Candidate], rnd: int, opt: SelectOptio
         if progress:
             progress(f"round {rnd}: fitting {sc.candidate.key}")
         fm = refine(current, sc, priors)
-        if isinstance(sc.candidate, Unbalance):
+        if isinstance(sc.candidate, SynchronousLine):
             # the record may begin with the rotor already in synchronous steady state
             alt = refine(current, Screen(replace(sc.candidate, start="steady"), sc.gain,
                                          sc.phi), priors)
@@ -338,18 +339,15 @@ def select(nominal: FittedModel, options: SelectOptions | None = None,
     """Greedy forward selection of candidate physics on top of the nominal fit.
 
     In every round the nominal model's own left-out coefficients (``nominal_family``
-    candidates) are tried first; physics is tried only when none of them is accepted.
+    candidates) are tried first; physics is tried only when none of them is accepted. A
+    repeatable effect may be added again at another location (registry.admissible).
     """
     opt = options or SelectOptions()
     current = nominal
     accepted: list[FittedModel] = []
     scores: list[dict[str, Any]] = []
     for rnd in range(1, opt.max_effects + 1):
-        used = {c.key if c.nominal_family else c.effect for c in current.candidates}
-        sampled = any(c.own_sampling for c in current.candidates)
-        pool = [c for c in opt.candidates
-                if (c.key if c.nominal_family else c.effect) not in used
-                and not (sampled and c.own_sampling)]
+        pool = [c for c in opt.candidates if admissible(c, current.candidates)]
         chosen = None
         for group in ([c for c in pool if c.nominal_family],
                       [c for c in pool if not c.nominal_family]):

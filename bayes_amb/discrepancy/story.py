@@ -5,6 +5,12 @@ from __future__ import annotations
 
 from typing import Any
 
+from bayes_amb.discrepancy.library.registry import REGISTRY
+
+
+def _library_titles() -> str:
+    return ", ".join(e.title for e in REGISTRY.values())
+
 
 def _bands(bands: list[list[float]]) -> str:
     parts = [f"{lo:.0f}" if abs(hi - lo) < 1 else f"{lo:.0f}-{hi:.0f}" for lo, hi in bands[:4]]
@@ -113,7 +119,7 @@ def plain_language(report: dict[str, Any]) -> str:
             text.append(f"With the nominal model {', '.join(bound)} sat on its prior bound, "
                         "absorbing the missing physics; with it added it no longer does.")
     elif not unexpl:
-        text.append("None of the candidate physics in the library explains it.")
+        text.append(f"None of the candidate physics ({_library_titles()}) explains it.")
     if unexpl:
         text.append(unexpl)
     if noise:

@@ -347,10 +347,14 @@ def discrepancy_section(run: RunData) -> Section:
     if dg.get("explanations"):
         tables.append(Table("Named physics (posterior of its parameters)",
                             ["effect", "location", "parameter", "mean", "90 % HDI", "unit",
-                             "log BF"],
-                            [[e["effect"], e["location"], k, g(v["mean"]), _hdi(v), v["unit"],
-                              g(e["score"], 3)]
-                             for e in dg["explanations"] for k, v in e["params"].items()]))
+                             "log BF", "cannot be told from"],
+                            [[_effect_title(e["effect"]), e["location"], k, g(v["mean"]),
+                              _hdi(v), v["unit"], g(e["score"], 3),
+                              "; ".join(e.get("equivalence_class", [])[1:]) or "–"]
+                             for e in dg["explanations"] for k, v in e["params"].items()],
+                            "Effect names and units from the physics library "
+                            "(`bayes-amb library`); the last column is the effect's "
+                            "equivalence class: explanations with the same u → y map."))
     fit = dg.get("fit", {})
     if fit:
         tables.append(Table("Fit before and after", [
@@ -385,6 +389,13 @@ def discrepancy_section(run: RunData) -> Section:
         paras.append(f"Criterion: {dg['criterion']}. Inference: {dg.get('inference', '?')}.")
     return _section("discrepancy", paragraphs=paras, tables=tables,
                     figures=fg.discrepancy_figures(dg, run.diagnosis_residuals, truth))
+
+
+def _effect_title(name: str) -> str:
+    """'actuator_lag (actuator lag)' from the registry; the bare name if it is unknown."""
+    from bayes_amb.discrepancy.library.registry import NOMINAL_FAMILY, REGISTRY
+    e = REGISTRY.get(name) or NOMINAL_FAMILY.get(name)
+    return f"{name} ({e.title})" if e is not None else name
 
 
 def studies_section(run: RunData) -> Section:

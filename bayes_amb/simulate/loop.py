@@ -111,15 +111,20 @@ def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray
     Ak, Bk, Ck, Dk = (np.asarray(m, dtype=float) for m in controller)
     Ad, m_del, G_now, G_prev = delayed_input_matrices(truth.A, truth.B, dt, truth.delay_s)
     Cg = truth.sensor_gain[:, None] * truth.C
-    # unbalance: sampled forward-whirl force, held over each sample (ZOH)
+    # unbalance: the continuous forward-whirl force amp [cos, sin](w t + ph), integrated
+    # exactly over each sample: x+ = Ad x + Re((A - j w I)^-1 (Ad - e^{j w dt} I) B_f
+    # [1, -j] amp e^{j (w t_k + ph)})
     force_term = np.zeros((n, truth.n_states))
     if truth.B_f is not None and truth.unbalance is not None:
-        _, Gf = zoh(truth.A, truth.B_f, dt)
         amp, ph = truth.unbalance
         omega = truth.speed_rpm * 2 * np.pi / 60
+        Ad_f, _ = zoh(truth.A, truth.B_f, dt)
+        eye = np.eye(truth.n_states)
+        Gw = np.linalg.solve(truth.A - 1j * omega * eye,
+                             (Ad_f - np.exp(1j * omega * dt) * eye) @ truth.B_f)
         t = np.arange(n) * dt
-        f = amp * np.column_stack([np.cos(omega * t + ph), np.sin(omega * t + ph)])
-        force_term = f @ Gf.T
+        force_term = np.real(np.exp(1j * (omega * t + ph))[:, None]
+                             * (Gw @ np.array([1.0, -1j]))[None, :]) * amp
     x = np.zeros(truth.n_states)
     xk = np.zeros(Ak.shape[0])
     u_hist = np.zeros((n + m_del + 1, truth.B.shape[1]))   # u_hist[k + m_del + 1] = u_plant[k]
