@@ -60,11 +60,25 @@ def made(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def cli_report(made):
-    """(exit status, --json output, report.html) of ``bayes-amb report RUN --json``."""
+    """(exit status, --json output, report.html) of ``bayes-amb report RUN --json``; every
+    matplotlib Figure the report rendered is kept in made["figures"] (key, Figure)."""
+    from bayes_amb.report import engineering as rep_eng
+    from bayes_amb.report import figures as rep_fig
+
     out = made["dir"] / "out"
     buf = io.StringIO()
-    with contextlib.redirect_stdout(buf):
+    rendered = []
+    original = rep_fig.render_figure
+
+    def keep(fig, key, *args, **kwargs):
+        rendered.append((key, fig))
+        return original(fig, key, *args, **kwargs)
+
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(buf):
+        mp.setattr(rep_fig, "render_figure", keep)
+        mp.setattr(rep_eng, "render_figure", keep)
         rc = main(["report", str(made["run"]), "--out", str(out), "--json"])
+    made["figures"] = rendered
     return rc, json.loads(buf.getvalue()), (out / "report.html").read_text(encoding="utf-8")
 
 
@@ -229,12 +243,14 @@ def test_residual_tests_detect_model_error():
 
 
 def _visible_font_sizes(fig, text_width_in: float = 7.17, max_height_in: float = 8.98):
-    """Font sizes (pt) of every visible, non-empty text of a Figure as printed: scaled by
-    the factor the PDF template applies to fit the A4 text width (182 mm) and the 228 mm
-    figure height."""
-    w, h = fig.get_size_inches()
-    scale = min(1.0, text_width_in / w, max_height_in / h)
+    """Font sizes (pt) of every visible, non-empty text of a Figure as printed. The report
+    saves figures with bbox "tight" (pad 0.1 in), and the PDF template shrinks an image to
+    the A4 text width (182 mm) and to 228 mm in height: the scale comes from the tight
+    box, not from the nominal figure size (legends outside the axes widen it)."""
     fig.canvas.draw()
+    box = fig.get_tightbbox(fig.canvas.get_renderer())
+    w, h = box.width + 0.2, box.height + 0.2                 # inches, with the pad
+    scale = min(1.0, text_width_in / w, max_height_in / h)
     sizes = []
     for t in fig.findobj(lambda a: hasattr(a, "get_fontsize") and hasattr(a, "get_text")):
         if t.get_visible() and t.get_text().strip():
@@ -256,18 +272,26 @@ def test_report_hygiene(made, cli_report):
     assert SECTION_TITLES["engineering"] in printed["sections"]
 
 
-def test_engineering_figures_fonts_at_least_7pt(made):
-    from bayes_amb.engineering import frequency_responses, physical_quantities
-    from bayes_amb.plots import engineering as pe
+def test_every_report_figure_prints_fonts_of_at_least_7pt(made, cli_report):
+    """Every figure of the report (all sections the run has: engineering, model,
+    controller, data, identification, validation), every visible text, as printed: >= 7
+    pt (issue 17). The prior-posterior inset's ticks were 6.5 pt at 8.4 in, 5.6 pt
+    printed."""
+    figures = made["figures"]
+    assert len(figures) == cli_report[1]["n_figures"]
+    small = {key: [(round(s, 2), t[:30]) for s, t in _visible_font_sizes(fig) if s < 7.0]
+             for key, fig in figures}
+    assert not {k: v for k, v in small.items() if v}
 
-    run = collect_run(made["run"])
-    res = physical_quantities(run, run.recording, [25000.0, 31500.0], n_draws=5,
-                              model="reduced")
-    frf = frequency_responses(run, run.recording, n_draws=5, model="reduced")
-    for fig in (pe.plot_modes_vs_speed(res), pe.plot_sensitivity_band(res),
-                pe.plot_frf(frf, "plant"), pe.plot_frf(frf, "compliance")):
-        small = [(round(s, 2), t) for s, t in _visible_font_sizes(fig) if s < 7.0]
-        assert not small, small
+
+def test_print_css_has_no_text_under_7pt():
+    """The PDF style sheet (the template's print media block) sets no font size under 7 pt
+    (the <pre> of the command line was 6.5 pt)."""
+    from importlib.resources import files
+
+    css = files("bayes_amb.report").joinpath("templates/report.html.j2").read_text("utf-8")
+    sizes = [float(v) for v in re.findall(r"font-size:\s*([\d.]+)pt", css)]
+    assert sizes and min(sizes) >= 7.0, sizes
 
 
 def test_study_seed_is_read_from_the_manifest(bare, tmp_path):

@@ -62,8 +62,9 @@ def draws_from(source: Any, n_draws: int = 200, seed: int = 0) -> Draws:
     """Thinned posterior draws from an identification result, a report RunData or Draws.
 
     With emcee samples: ``n_draws`` evenly spaced draws of the flattened chains. Without
-    (MAP-only runs): draws from the Laplace normal N(mean, diag(sd^2)) of summary.json
-    (correlations are not stored there), with a numpy Generator seeded by ``seed``.
+    (MAP-only runs): draws from the Laplace normal of summary.json, N(mean, C) with C its
+    "laplace_cov" (with the correlations), or diag(sd^2) for a summary written before it
+    was stored, with a numpy Generator seeded by ``seed``.
     """
     if isinstance(source, Draws):
         th = source.theta
@@ -88,6 +89,11 @@ def draws_from(source: Any, n_draws: int = 200, seed: int = 0) -> Draws:
     sd = np.array([float(par[n].get("sd") or 0.0) for n in names])
     sd = np.where(np.isfinite(sd), sd, 0.0)
     rng = np.random.default_rng(seed)
+    lc = summary.get("laplace_cov")
+    if isinstance(lc, dict) and tuple(lc.get("names", ())) == names:
+        cov = np.asarray(lc["theta"], dtype=float)
+        return Draws(names, rng.multivariate_normal(mean, cov, size=n_draws,
+                                                    method="eigh"))
     return Draws(names, mean + sd * rng.standard_normal((n_draws, len(names))))
 
 
@@ -203,6 +209,25 @@ def _summarise(name: str, unit: str, group: str, values: NDArray, nominal: float
                     int(ok.size), estimated)
 
 
+def _minimum(name: str, modes: list[Quantity], nominal: float) -> Quantity:
+    """The smallest log dec over the modes: value, lo and hi are the minima of the modes'
+    medians, lower and upper ends.
+
+    Not the quantiles of the per-draw minimum: where two modes' log decs nearly tie, the
+    minimum of their draws lies below both, so its 95 % quantile hardly reaches the true
+    minimum (rigid 3 and 4 differ by 0.03 on the reference rig: 25 of 30 intervals covered
+    it in the coverage test, misses by 0.001). If every mode's interval covers its own
+    truth, [min lo, min hi] covers the true minimum; away from a tie it is the interval of
+    the weakest mode itself.
+    """
+    ok = [m for m in modes if m.n_valid > 0 and np.isfinite(m.value)]
+    if not ok:
+        return Quantity(name, "", "api617", float("nan"), float("nan"), float("nan"),
+                        nominal, 0)
+    return Quantity(name, "", "api617", min(m.value for m in ok), min(m.lo for m in ok),
+                    min(m.hi for m in ok), nominal, min(m.n_valid for m in ok))
+
+
 def _sens_grid(rec: Recording, n_freq: int) -> NDArray:
     return np.logspace(0.0, np.log10(0.5 / rec.dt), n_freq)
 
@@ -312,12 +337,10 @@ def physical_quantities(source: Any, recording: Recording,
                                                         np.array([fn < fr]))[0])
                 q[f"{label}: required separation margin"] = _summarise(
                     f"{label}: required separation margin", "%", "api617", req, reqn)
-        ld = log_decrement(lam[:, j])
         ldn = log_decrement(lam_nom[j])
-        q[f"minimum log dec @ {s:.0f} rpm"] = _summarise(
-            f"minimum log dec @ {s:.0f} rpm", "", "api617",
-            np.where(np.all(np.isnan(ld), axis=1), np.nan, np.nanmin(
-                np.where(np.isnan(ld), np.inf, ld), axis=1)),
+        q[f"minimum log dec @ {s:.0f} rpm"] = _minimum(
+            f"minimum log dec @ {s:.0f} rpm",
+            [q[_mode_key(label, "log dec", s)] for label in MODE_LABELS],
             float(np.nanmin(ldn)) if np.any(np.isfinite(ldn)) else float("nan"))
     for c, ch in enumerate(CHANNELS):
         q[f"peak sensitivity {ch}"] = _summarise(

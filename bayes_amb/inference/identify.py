@@ -131,6 +131,10 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         raise BayesAmbError(f"recording {recording.source}: no parameter value in the prior "
                             "gives a finite likelihood (the controller does not stabilise the "
                             "model anywhere in the prior range?)")
+    # prewhitening from the noise model at the MAP, then the MAP again under it
+    # (WhittleLikelihood.set_model_prewhitening: the data-designed FIR leaves leakage)
+    like.set_model_prewhitening(m.theta, m.log10_sigma)
+    m = find_map(post, opt.map_method, x0=np.concatenate([m.theta, m.log10_sigma]))
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
     summary: dict[str, Any] = {
@@ -155,6 +159,10 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"
         summary["parameters"] = _laplace_summary(names, m, cov, recording.rig)
+        if cov is not None:                 # theta block: derived quantities need the
+            summary["laplace_cov"] = {      # correlations, not only the sds
+                "names": list(names), "theta": np.asarray(cov)[:len(names),
+                                                               :len(names)].tolist()}
         summary["converged"] = bool(m.success and cov is not None)
         summary["wall_s"] = time.perf_counter() - t0
         return result

@@ -118,7 +118,7 @@ def plot_rotor_sketch(rig: Rig, ax: Axes | None = None) -> Figure:
             label=f"{s.n_nodes} FE nodes")
     for n in sorted({1, s.n_nodes, *range(5, s.n_nodes, 5)}):
         ax.annotate(str(n), (z[n - 1], 0.0), xytext=(0, 4), textcoords="offset points",
-                    ha="center", va="bottom", fontsize=7, color="0.2", zorder=6)
+                    ha="center", va="bottom", fontsize=7.5, color="0.2", zorder=6)
     r_max = R
     for d in rig.discs:
         dia, width = (v * mm for v in _disc_size(d.mass, d.ip, d.id, s.diameter))

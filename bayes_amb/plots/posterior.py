@@ -110,7 +110,9 @@ def plot_pair(draws: dict[str, NDArray], labels: dict[str, str], truth: dict[str
     """Corner plot: marginal histograms on the diagonal, draws below it."""
     names = list(draws)
     k = len(names)
-    size = min(8.0, 1.9 * k + 1.2)
+    # printed at 100 % (text width 7.17 in) and short enough to share an A4 page with the
+    # prior-posterior figure that follows it in the report
+    size = min(5.8, 1.9 * k + 1.2)
     fig, axes = _grid(k, k, (size, size + 0.3))
     flat = {n: draws[n].ravel() for n in names}
     m = flat[names[0]].size
@@ -139,7 +141,7 @@ def plot_pair(draws: dict[str, NDArray], labels: dict[str, str], truth: dict[str
                 ax.set_ylabel(labels.get(ni, ni), fontsize=8.5)
             elif j > 0:
                 ax.set_yticklabels([])
-            ax.tick_params(labelsize=7.5)
+            ax.tick_params(labelsize=8.0)
             for lab in ax.get_xticklabels():
                 lab.set_rotation(35)
     _legend_marks(fig, truth, "MAP")
@@ -158,7 +160,8 @@ def plot_prior_posterior(draws: dict[str, NDArray], priors: dict[str, tuple[NDAr
     names = list(draws)
     cols = min(2, len(names))
     rows = -(-len(names) // cols)
-    fig, axes = _grid(rows, cols, (4.0 * cols + 0.4, 2.9 * rows + 0.6))
+    # at most 7.1 in wide, so that the PDF prints the figure unscaled (fonts >= 7.5 pt)
+    fig, axes = _grid(rows, cols, (3.4 * cols + 0.3, 2.3 * rows + 0.7))
     for ax, n in zip(axes.ravel(), names, strict=False):
         d = draws[n].ravel()
         grid, pdf = priors[n]
@@ -177,9 +180,9 @@ def plot_prior_posterior(draws: dict[str, NDArray], priors: dict[str, tuple[NDAr
             if n in truth and e[0] <= truth[n] <= e[-1]:
                 ins.axvline(truth[n] - ref, color=_TRUE, lw=1.3)
             ins.set_yticks([])
-            ins.tick_params(labelsize=6.5)
-            ins.set_title(f"zoom: θ − {ref:g}", fontsize=7.5)
-            ins.xaxis.get_offset_text().set_fontsize(6.5)
+            ins.tick_params(labelsize=7.5)
+            ins.set_title(f"zoom: θ − {ref:g}", fontsize=8.0)
+            ins.xaxis.get_offset_text().set_fontsize(7.5)
         if n in truth:
             ax.axvline(truth[n], color=_TRUE, lw=1.5, label="true value")
         sd_ratio = float(np.std(d) / _grid_sd(grid, p))
@@ -190,7 +193,8 @@ def plot_prior_posterior(draws: dict[str, NDArray], priors: dict[str, tuple[NDAr
         ax.set_xlabel("θ (dimensionless)")
     for ax in axes.ravel()[len(names):]:
         ax.set_visible(False)
-    axes[0, 0].legend(loc="upper left", fontsize=8)
+    h, lab = axes[0, 0].get_legend_handles_labels()      # below the axes, not over the prior
+    fig.legend(h, lab, loc="outside lower center", ncols=len(lab), fontsize=8.5)
     return fig
 
 
