@@ -167,7 +167,8 @@ def test_passes_cover_whole_bands_in_order():
 def test_rows_sharing_theta_are_computed_once_and_equal_alone(rec):
     """A gradient's steps along the noise coordinates share theta: the band sums of such a
     batch equal those of each row alone (up to the transient's 1e-13 truncation, whose
-    length follows the batch's slowest pole)."""
+    length follows the batch's slowest pole; with the actuator lag as added continuous
+    states the log likelihoods then agree to ~1e-11 relative, so 1e-10 is asserted)."""
     rng = np.random.default_rng(3)
     for like, p in _likelihoods(rec):
         P = _batch(p, rng)[:3]
@@ -176,7 +177,7 @@ def test_rows_sharing_theta_are_computed_once_and_equal_alone(rec):
         ls[[2, 4], 0] += [0.01, -0.01]
         batch = like.pointwise(theta, ls)
         alone = np.concatenate([like.pointwise(theta[i:i + 1], ls[i:i + 1]) for i in range(5)])
-        assert np.allclose(batch, alone, rtol=1e-12, atol=0)
+        assert np.allclose(batch, alone, rtol=1e-10, atol=0)
         assert np.array_equal(like.band_sums(theta)[0][0], like.band_sums(theta)[0][2])
 
 
