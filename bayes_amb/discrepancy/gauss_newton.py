@@ -81,6 +81,12 @@ class LinearModel:
     cols: NDArray
     MT: NDArray            # (A, n_bands * 16, A): M[a, c] with c last, for Q = MT @ w
 
+    def __post_init__(self) -> None:
+        like = self.like
+        # the noise sources' band spectra as they enter Psi_b (likelihood.RobustWhittle)
+        self.phi = like.phi_sources * (like.n * (like.nu - like.shift))[None, :, None, None]
+        self._noise_key: bytes | None = None
+
     @property
     def like(self) -> RobustWhittle:
         return self.post.likelihood  # type: ignore[return-value]
@@ -91,6 +97,22 @@ class LinearModel:
         x[self.post.p:] = ls
         return x
 
+    def _noise_terms(self, ls: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, bool]:
+        """sigma^2, Psi_b, sum_b nu_b log|Psi_b| and tr(Psi_b^-1 Phi_sb) at log10 sigma ls
+        (remembered: a search with the noise held evaluates one ls many times)."""
+        key = np.asarray(ls, dtype=float).tobytes()
+        if key != self._noise_key:
+            like = self.like
+            sig2 = 10.0 ** (2 * np.asarray(ls, dtype=float))
+            Psi = np.tensordot(sig2, self.phi, axes=(0, 0))
+            s0, ld0 = np.linalg.slogdet(Psi)
+            ok = bool(np.all(s0.real > 0))
+            tr_psi = (np.einsum("bij,sbji->sb", np.linalg.inv(Psi), self.phi).real if ok
+                      else np.zeros((3, like.starts.size)))
+            self._noise_cache = (sig2, Psi, float(np.sum(like.nu * ld0)), tr_psi, ok)
+            self._noise_key = key
+        return self._noise_cache
+
     def value_grad(self, delta: NDArray, ls: NDArray) -> tuple[float, NDArray, NDArray]:
         """Linearised log posterior and its gradient along delta (cols) and log10 sigma."""
         like = self.like
@@ -98,25 +120,20 @@ class LinearModel:
         w = np.concatenate([[1.0], delta])
         Q = (self.MT @ w).reshape(w.size, nb, P_CH, P_CH)       # Q_a = sum_c w_c M[a, c]
         P = np.tensordot(w, Q, axes=(0, 0))
-        sig2 = 10.0 ** (2 * np.asarray(ls))
-        phi = like.phi_sources * (like.n * (like.nu - like.shift))[None, :, None, None]
-        Psi = np.tensordot(sig2, phi, axes=(0, 0))
-        s0, ld0 = np.linalg.slogdet(Psi)
+        sig2, Psi, nu_ld0, tr_psi, ok = self._noise_terms(ls)
         s1, ld1 = np.linalg.slogdet(Psi + P)
-        if not (np.all(s0.real > 0) and np.all(s1.real > 0)):
+        if not (ok and np.all(s1.real > 0)):
             return -np.inf, np.zeros(delta.size), np.zeros(3)
         wt = like.nu + like.counts
-        ll = float(np.sum(like._gamma_term + like.nu * ld0 - wt * ld1
-                          - P_CH * like.counts * np.log(np.pi)))
-        ll += -2 * P_CH * like.k.size * np.log(like.scale) + like.jacobian
+        ll = float(np.sum(like._gamma_term - wt * ld1 - P_CH * like.counts * np.log(np.pi)))
+        ll += nu_ld0 - 2 * P_CH * like.k.size * np.log(like.scale) + like.jacobian
         theta = self.x0[:self.post.p].copy()
         theta[self.cols] += delta
         lp = self.post.priors.log_prior(theta[None], np.asarray(ls)[None])[0]
         K = np.linalg.inv(Psi + P)
         tr_kq = np.einsum("bij,abji->ab", K, Q[1:]).real
         g_delta = -2.0 * tr_kq @ wt + prior_gradient(self.post, theta)[self.cols]
-        tr_psi = np.einsum("bij,sbji->sb", np.linalg.inv(Psi), phi).real
-        tr_k = np.einsum("bij,sbji->sb", K, phi).real
+        tr_k = np.einsum("bij,sbji->sb", K, self.phi).real
         g_ls = 2 * _LN10 * sig2 * (tr_psi @ like.nu - tr_k @ wt)
         return ll + float(lp), g_delta, g_ls
 
