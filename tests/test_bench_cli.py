@@ -122,3 +122,18 @@ def test_study_throughput_row(bench_json):
                                    "s_per_1000": 480.0})
     row = next(ln for ln in format_text(data).splitlines() if ln.startswith("study"))
     assert "1000 replicates in 480 s" in row and "8.0 min/1000" in row
+
+
+def test_diagnose_benchmark_names_the_hidden_lag():
+    """`bench --only diagnose --quick`: the diagnosis it times names the lag it hides (the
+    benchmark raises BenchmarkError otherwise); its row and detail line are printed."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["bench", "--only", "diagnose", "--quick", "--json"])
+    assert code == 0, err.getvalue()
+    doc = json.loads(out.getvalue())
+    d = doc["diagnose"]
+    assert "actuator_lag" in d["effects"] and d["n_samples"] == 5000
+    assert math.isfinite(d["cpu_s"]) and d["cpu_s"] > 0 and d["target_median_s"] == 20
+    text = format_text(doc)
+    assert "diagnose" in text and "actuator_lag" in text

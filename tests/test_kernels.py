@@ -64,9 +64,9 @@ def _batch(p: int, rng: np.random.Generator) -> np.ndarray:
     return P
 
 
-def _majorant(like, P):
-    """Sum over each band of |R_i| |R_j| with |R| the absolute-value majorant of the terms,
-    and the largest number of operations along one residual entry."""
+def _residual_majorant(like, P):
+    """|R| with every term in absolute value (nb, nf, 4), and the largest number of
+    operations along one residual entry."""
     mb, xi = like.forward.modal(P, like.x_w)
     num = np.abs(like.X) @ np.abs(np.swapaxes(mb.Bm, 1, 2)) + np.abs(xi)[:, None, :]
     u_abs = num / np.abs(like.z[None, :, None] - mb.lam[:, None, :])       # (nb, nf, ns)
@@ -76,8 +76,40 @@ def _majorant(like, P):
     if lines is not None:
         r_abs = r_abs + np.einsum("kij,bj->bki", np.abs(lines), np.abs(coef))
         n_ops += lines.shape[2]
+    return r_abs, n_ops
+
+
+def _majorant(like, P):
+    """Sum over each band of |R_i| |R_j| with |R| the absolute-value majorant of the terms,
+    and the largest number of operations along one residual entry."""
+    r_abs, n_ops = _residual_majorant(like, P)
     outer = r_abs[..., :, None] * r_abs[..., None, :]
     return np.add.reduceat(outer, like.starts, axis=1), n_ops
+
+
+@pytest.mark.parametrize("width", [512, 7])
+def test_residual_dft_equals_the_numpy_path(rec, width, monkeypatch):
+    """The kernel's residual DFT (used for Jacobians, the eq. 15 cost and the predictive
+    checks) against dft_response: the same terms in another order."""
+    monkeypatch.setattr(kernels, "CHUNK_BINS", width)
+    rng = np.random.default_rng(5)
+    for like, p in _likelihoods(rec):
+        P = _batch(p, rng)
+        monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+        ref, stable = like.residual_dft(P)
+        monkeypatch.setenv(kernels.KERNEL_ENV, "numba")
+        fast, stable_fast = like.residual_dft(P)
+        assert stable.all() and np.array_equal(stable, stable_fast)
+        r_abs, n_ops = _residual_majorant(like, P)
+        tol = 4 * 4 * gamma(n_ops) * r_abs
+        assert np.all(np.abs(fast - ref) <= tol), float(np.max(np.abs(fast - ref) / tol))
+        assert not np.all(np.abs(ref * (1 + 1e-9) - ref) <= tol)
+        if isinstance(like, RobustWhittle):             # the prediction alone: E, lines out
+            Y = like.prediction_dft(P)[0]
+            monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+            Y_ref = like.prediction_dft(P)[0]
+            monkeypatch.setenv(kernels.KERNEL_ENV, "numba")
+            assert np.all(np.abs(Y - Y_ref) <= tol)
 
 
 @pytest.mark.parametrize("width", [512, 7])     # one pass; many, some bands wider than 7

@@ -15,6 +15,7 @@ from bayes_amb.bench.cases import (
     BENCHMARKS,
     DEFAULT_BENCHMARKS,
     bench_cli,
+    bench_diagnose,
     bench_likelihood,
     bench_map,
     bench_posterior,
@@ -24,6 +25,7 @@ from bayes_amb.bench.cases import (
 )
 from bayes_amb.bench.results import (
     BenchmarkError,
+    DiagnoseBench,
     LikelihoodBench,
     MapBench,
     MapRun,
@@ -35,9 +37,9 @@ from bayes_amb.bench.results import (
     report,
 )
 
-__all__ = ["BENCHMARKS", "DEFAULT_BENCHMARKS", "BenchmarkError", "LikelihoodBench", "MapBench",
-           "MapRun", "ParamRecovery", "PosteriorBench", "Result", "SimulateBench", "bench_cli",
-           "bench_likelihood", "bench_map", "bench_posterior", "bench_simulate", "closed_loop_ss",
-           "environment",
+__all__ = ["BENCHMARKS", "DEFAULT_BENCHMARKS", "BenchmarkError", "DiagnoseBench",
+           "LikelihoodBench", "MapBench", "MapRun", "ParamRecovery", "PosteriorBench", "Result",
+           "SimulateBench", "bench_cli", "bench_diagnose", "bench_likelihood", "bench_map",
+           "bench_posterior", "bench_simulate", "closed_loop_ss", "environment",
            "make_recording", "median_time", "naive_eval_us", "naive_log_likelihood",
            "report", "run_benchmarks"]

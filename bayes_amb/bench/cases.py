@@ -71,7 +71,8 @@ def make_recording(truth: str, params: dict[str, float], dt: float, duration: fl
     seed : int
         Seed of the simulation's random streams.
     **noise : float
-        noise_rms, r1_rms (m), r2_rms (A), passed to SimulationConfig.
+        noise_rms, r1_rms (m), r2_rms (A) (and effects, a tuple of hidden effects),
+        passed to SimulationConfig.
 
     Returns
     -------
@@ -316,13 +317,22 @@ def bench_study(quick: bool = False) -> Result:
     return bench_study_throughput(20 if quick else 1000, workers=2)
 
 
+def bench_diagnose(quick: bool = False) -> Result:
+    """One diagnosis of a 2 s, 10 kHz recording with a hidden lag, default options
+    (bayes_amb.bench.diagnose_case; quick: 0.5 s)."""
+    from bayes_amb.bench.diagnose_case import bench_diagnose as run
+
+    return run(quick)
+
+
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
-    "simulate": bench_simulate, "map": bench_map, "cli": bench_cli, "study": bench_study}
+    "simulate": bench_simulate, "map": bench_map, "diagnose": bench_diagnose,
+    "cli": bench_cli, "study": bench_study}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
-"""What ``bayes-amb bench`` runs without --only (the CLI runs and the study sweep take
-minutes: ask for them with --only cli, --only study)."""
+"""What ``bayes-amb bench`` runs without --only (the diagnosis, the CLI runs and the study
+sweep are asked for with --only diagnose, --only cli, --only study)."""
 
 
 @limited_threads

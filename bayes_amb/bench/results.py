@@ -171,6 +171,21 @@ class MapBench(Result):
     eval_ratio: float
 
 
+@dataclass(frozen=True)
+class DiagnoseBench(Result):
+    """One diagnosis with default options (bayes_amb.bench.diagnose_case): CPU and wall
+    time (s), the issue's target for the median CPU time, the record (s, samples), and what
+    it found (effects named, verdict)."""
+
+    cpu_s: float
+    wall_s: float
+    target_median_s: float
+    duration_s: float
+    n_samples: int
+    effects: tuple[str, ...]
+    verdict: str
+
+
 def environment() -> dict[str, Any]:
     """What the timings depend on: versions, CPU count and BLAS thread settings.
 

@@ -72,6 +72,10 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         rows.append(("map", f"{lb['wall_s']:.2f} s, {lb['n_evals']} evals",
                      f"{nm['wall_s']:.2f} s, {nm['n_evals']} evals",
                      f"{d['map']['speedup']:.1f}x"))
+    if "diagnose" in d:
+        r = d["diagnose"]
+        rows.append(("diagnose", f"{r['cpu_s']:.1f} s CPU ({r['wall_s']:.1f} s wall)",
+                     f"target median {r['target_median_s']:g} s", "-"))
     if "cli" in d:
         r = d["cli"]
         rows.append(("cli", f"{r['default_s']:.1f} s without the variable",
@@ -120,6 +124,11 @@ def _details(d: dict[str, Any]) -> list[str]:
         out.append("map: paper's case (k_By = 0.5); " + "; ".join(
             f"{v['method']} theta {v['theta']:.6f} (error {v['abs_error']:.1e}, log post "
             f"{v['log_post']:.1f})" for v in (m["lbfgs"], m["nelder_mead"])))
+    if "diagnose" in d:
+        r = d["diagnose"]
+        out.append(f"diagnose: {r['duration_s']:g} s at 10 kHz ({r['n_samples']} samples), "
+                   f"hidden 2.5 kHz lag, default options (eight coefficients); verdict "
+                   f"{r['verdict']!r}, named {', '.join(r['effects']) or 'nothing'}")
     if "cli" in d:
         r = d["cli"]
         out.append(f"cli: `{r['command']}`, {r['repeats']} runs per environment, interleaved;"

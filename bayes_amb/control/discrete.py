@@ -41,6 +41,39 @@ def ss_freqresp(A: NDArray, B: NDArray, C: NDArray, D: NDArray | None, z: NDArra
     return out
 
 
+def ss_freqresp_modal(A: NDArray, B: NDArray, C: NDArray, D: NDArray | None, z: NDArray,
+                      max_cond: float = 1e6) -> NDArray:
+    """:func:`ss_freqresp` through the eigen-decomposition A = V diag(lam) V^-1,
+
+        C (zI - A)^-1 B + D = (C V) diag(1 / (z - lam)) (V^-1 B) + D,
+
+    O(n) per point instead of an n x n solve (the noise filters of the whole-band
+    likelihood, 10^4 points). Its rounding grows with the condition number of V: above
+    max_cond (a nearly defective A) it falls back to the solve.
+
+    Examples
+    --------
+    >>> A = np.array([[0.5, 0.1], [0.0, -0.3]]); B = np.eye(2); C = np.ones((1, 2))
+    >>> z = np.exp(1j * np.linspace(0.1, 3.0, 5))
+    >>> bool(np.allclose(ss_freqresp_modal(A, B, C, None, z), ss_freqresp(A, B, C, None, z)))
+    True
+    """
+    n = A.shape[0]
+    z = np.asarray(z)
+    if n == 0:
+        return ss_freqresp(A, B, C, D, z)
+    lam, V = np.linalg.eig(A)
+    if not np.all(np.isfinite(lam)) or np.linalg.cond(V) > max_cond:
+        return ss_freqresp(A, B, C, D, z)
+    Bm = np.linalg.solve(V, B.astype(complex))                      # (n, m)
+    Cm = C @ V                                                       # (p, n)
+    inv = 1.0 / (z[:, None] - lam[None, :])                          # (n_z, n)
+    out = (Cm[None] * inv[:, None, :]) @ Bm
+    if D is not None:
+        out = out + D[None]
+    return out
+
+
 def spectral_radius(A: NDArray) -> float:
     """Largest |eigenvalue| (discrete-time stability: < 1)."""
     return float(np.max(np.abs(np.linalg.eigvals(A)))) if A.size else 0.0

@@ -51,6 +51,7 @@ from scipy.signal import lfilter
 from scipy.special import gammaln
 
 from bayes_amb.discrepancy.model import ExtendedForwardModel
+from bayes_amb.inference import kernels
 from bayes_amb.inference.forward import ModalBatch, dft_response, final_modal_state
 from bayes_amb.inference.whittle import WhittleLikelihood
 
@@ -115,6 +116,10 @@ class RobustWhittle(WhittleLikelihood):
         """DFT of S(theta) x over the window (scaled), and the stability mask, for a batch
         of parameter rows P (nb, p + q); lines not included."""
         mb, xi = self.modal_state(P)
+        if kernels.use_compiled():
+            zero = np.zeros_like(self.E)
+            return -kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, zero,
+                                         self.scale), mb.stable
         return dft_response(mb, self.X, self.z, xi) / self.scale, mb.stable
 
     def for_model(self, forward: ExtendedForwardModel, theta_ref: NDArray) -> RobustWhittle:
@@ -156,15 +161,6 @@ class RobustWhittle(WhittleLikelihood):
         coef = np.hstack([P[:, fwd.slices[fwd.candidates.index(c)]]
                           for c in fwd.line_candidates])
         return np.concatenate(self.lines, axis=2), coef
-
-    def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
-        P = np.atleast_2d(theta)
-        Y, stable = self.prediction_dft(P)
-        R = self.E[None] - Y
-        lines, coef = self._line_terms(P)
-        if lines is not None:
-            R = R - np.einsum("kcl,bl->bkc", lines, coef)
-        return R, stable
 
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         theta = np.atleast_2d(theta)

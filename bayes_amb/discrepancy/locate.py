@@ -46,7 +46,7 @@ from numpy.typing import NDArray
 from scipy import stats
 from scipy.ndimage import median_filter, uniform_filter1d
 
-from bayes_amb.control.discrete import ss_freqresp
+from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.rig import CHANNELS
 
@@ -132,28 +132,32 @@ def locate_bands(k: NDArray, n: int, dt: float, n_bands: int, min_bins: int) -> 
 
 
 def _coherence(R: NDArray, X: NDArray, bands: list[NDArray]) -> tuple[NDArray, NDArray]:
-    """Multiple coherence and F-test p-value of R (nf, 4) on X (nf, m) per band, channel."""
+    """Multiple coherence and F-test p-value of R (nf, 4) on X (nf, m) per band, channel;
+    R may carry a leading batch dimension (nd, nf, 4), then so do the results. The
+    regression residual is R minus its projection on the band's orthonormal basis of X
+    (QR, shared by the batch)."""
     m = X.shape[1]
-    coh = np.zeros((len(bands), R.shape[1]))
+    R3 = R[None] if R.ndim == 2 else R
+    coh = np.zeros((R3.shape[0], len(bands), R3.shape[2]))
     p = np.ones_like(coh)
     for b, idx in enumerate(bands):
-        Xb, Rb = X[idx], R[idx]
         if idx.size <= m + 1:
             continue
-        beta, *_ = np.linalg.lstsq(Xb, Rb, rcond=None)
-        ss1 = np.sum(np.abs(Rb - Xb @ beta) ** 2, axis=0)
-        ss0 = np.sum(np.abs(Rb) ** 2, axis=0)
-        coh[b] = 1.0 - ss1 / np.maximum(ss0, 1e-300)
+        Q, _ = np.linalg.qr(X[idx])
+        Rb = R3[:, idx]
+        ss1 = np.sum(np.abs(Rb - Q @ (np.conj(Q.T) @ Rb)) ** 2, axis=1)
+        ss0 = np.sum(np.abs(Rb) ** 2, axis=1)
+        coh[:, b] = 1.0 - ss1 / np.maximum(ss0, 1e-300)
         F = ((ss0 - ss1) / m) / np.maximum(ss1 / (idx.size - m), 1e-300)
-        p[b] = stats.f.sf(F, 2 * m, 2 * (idx.size - m))
-    return coh, p
+        p[:, b] = stats.f.sf(F, 2 * m, 2 * (idx.size - m))
+    return (coh[0], p[0]) if R.ndim == 2 else (coh, p)
 
 
 def noise_cholesky(like: RobustWhittle, log10_sigma: NDArray) -> NDArray:
     """Per-bin Cholesky factor L_k (nf, 4, 4) of the fitted residual DFT covariance
     N Phi(w_k) (loop noise filters at the likelihood's reference, prewhitening gain)."""
     A, B, C, D = like.forward.noise_system(like.theta_ref)
-    H = ss_freqresp(A, B, C, D, like.z) / like.scale                    # (nf, 4, 12)
+    H = ss_freqresp_modal(A, B, C, D, like.z) / like.scale                    # (nf, 4, 12)
     s = np.repeat(10.0 ** np.asarray(log10_sigma), 4)
     Hs = H * s[None, None, :]
     Phi = (Hs @ np.conj(np.swapaxes(Hs, 1, 2))) * like.w_gain2[:, None, None] * like.n
@@ -274,23 +278,31 @@ def _windows(e: NDArray, n_windows: int, dt: float) -> tuple[NDArray, list[float
 
 
 def _ppc(like: RobustWhittle, P_hat: NDArray, cov: NDArray | None, L: NDArray,
-         bands: list[NDArray], obs: tuple[float, float], opt: LocateOptions) -> dict[str, float]:
-    """Posterior predictive p-values of (max coherence F-p, whitened power) under the fit."""
+         bands: list[NDArray], obs: tuple[float, float], opt: LocateOptions,
+         chunk: int = 25) -> dict[str, float]:
+    """Posterior predictive p-values of (max coherence F-p, whitened power) under the fit
+    (draws taken ``chunk`` at a time through the coherence and whitening)."""
     rng = np.random.default_rng(opt.seed)
     p = P_hat.size
     draws = np.tile(P_hat, (opt.n_ppc, 1))
     if cov is not None:
         draws = rng.multivariate_normal(P_hat, cov[:p, :p], size=opt.n_ppc)
     Y, stable = like.prediction_dft(np.vstack([P_hat, draws]))
-    ok = stable[1:]
+    ok = np.flatnonzero(stable[1:])
+    nf = like.z.size
+    L_inv = np.linalg.inv(L)
     t_coh, t_pow = [], []
-    for j in np.flatnonzero(ok):
-        w = (rng.normal(size=(like.z.size, 4))
-             + 1j * rng.normal(size=(like.z.size, 4))) / np.sqrt(2)
-        R = (Y[0] - Y[j + 1]) + (L @ w[..., None])[..., 0]
+    for c in range(0, ok.size, chunk):
+        j = ok[c:c + chunk]
+        noise = np.empty((j.size, nf, 4), dtype=complex)
+        for i in range(j.size):                 # each draw's noise, in the order drawn
+            noise[i] = (rng.normal(size=(nf, 4))
+                        + 1j * rng.normal(size=(nf, 4))) / np.sqrt(2)
+        R = (Y[0][None] - Y[j + 1]) + (L[None] @ noise[..., None])[..., 0]
         _, pc = _coherence(R, like.X, bands)
-        t_coh.append(-np.log10(max(pc.min(), 1e-300)))
-        t_pow.append(float(np.sum(np.abs(whiten(L, R)) ** 2)))
+        t_coh += list(-np.log10(np.maximum(pc.min(axis=(1, 2)), 1e-300)))
+        t_pow += list(np.sum(np.abs((L_inv[None] @ R[..., None])[..., 0]) ** 2,
+                             axis=(1, 2)))
     t_coh, t_pow = np.array(t_coh), np.array(t_pow)
     return {"coherence": float(np.mean(t_coh >= obs[0])) if t_coh.size else 1.0,
             "power": float(np.mean(t_pow >= obs[1])) if t_pow.size else 1.0}

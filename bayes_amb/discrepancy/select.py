@@ -33,15 +33,20 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
-import scipy.optimize as so
 from numpy.typing import NDArray
 from scipy import stats
 
 from bayes_amb.discrepancy.candidates import Candidate, SynchronousLine, all_candidates
+from bayes_amb.discrepancy.gauss_newton import gauss_newton, least_squares_start
 from bayes_amb.discrepancy.library.registry import admissible
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference.estimate import LogPosterior, find_map, hessian_covariance, local_search
+from bayes_amb.inference.estimate import (
+    LogPosterior,
+    _initial_point,
+    _theta_start,
+    hessian_covariance,
+)
 from bayes_amb.inference.priors import Prior
 from bayes_amb.io.recording import Recording
 
@@ -122,24 +127,52 @@ def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None
     return fwd, like, LogPosterior(like, fwd.priors)
 
 
-def local_fit(post: LogPosterior, x0: NDArray, maxiter: int = 300) -> tuple[NDArray, float]:
-    """L-BFGS-B from x0 over every dimension (vectorised central-difference gradients),
-    then the line bases (if any) are refreshed at the optimum and the search repeated."""
-    x, _ = local_search(post, "lbfgs", x0, maxiter=maxiter)
+def local_fit(post: LogPosterior, x0: NDArray) -> tuple[NDArray, float]:
+    """Gauss-Newton trust-region MAP search from x0 over every dimension
+    (gauss_newton.py), then the line bases (if any) are refreshed at the optimum and the
+    search repeated."""
+    x, _ = gauss_newton(post, x0)
     like: RobustWhittle = post.likelihood  # type: ignore[assignment]
     if like.lines:
         like.set_noise_reference(x[:post.p])
-        x, _ = local_search(post, "lbfgs", x, maxiter=maxiter)
+        x, _ = gauss_newton(post, x)
     return x, float(post(x[None])[0])
+
+
+def nominal_map(post: LogPosterior) -> NDArray:
+    """MAP of the nominal model, as identification's find_map searches it, but by
+    Gauss-Newton: the eq. 15 estimate (its noise filters then used), starts at it (noise
+    intensities on a grid, and with sigma_r1 switched on at two levels: from its lower
+    bound its gradient is ~0) and at the nominal model, a short search from each and a full
+    one from the best; the noise filters refreshed at that optimum, the noise intensities
+    re-seeded on the grid, and the search repeated."""
+    p = post.p
+    theta_ls = least_squares_start(post, _theta_start(post))
+    post.likelihood.set_noise_reference(theta_ls)
+    starts = [_initial_point(post, theta_ls), _initial_point(post, _theta_start(post))]
+    for level in (-6.0, -4.0):
+        alt = starts[0].copy()
+        alt[p + 1] = level
+        starts.append(alt)
+    short = [gauss_newton(post, s, max_iter=3) for s in starts]
+    x = short[int(np.argmax([f for _, f in short]))][0]
+    for rnd in range(2):
+        if rnd > 0:
+            alt = _initial_point(post, x[:p])
+            if post(alt[None])[0] > post(x[None])[0]:
+                x = alt
+        x, _ = gauss_newton(post, x)
+        post.likelihood.set_noise_reference(x[:p])
+    return x
 
 
 def fit_nominal(recording: Recording, params: tuple[str, ...], eps: NDArray,
                 priors: dict[str, Prior] | None = None, seed: int = 0,
                 start: int = 0) -> FittedModel:
-    """The nominal model's MAP (multi-start, as in identification) over the whole band."""
+    """The nominal model's MAP over the whole band (nominal_map; ``seed`` is kept for the
+    interface: the search draws no random starts)."""
     fwd, like, post = build(recording, params, eps, (), priors, start)
-    m = find_map(post, seed=seed)
-    x = np.concatenate([m.theta, m.log10_sigma])
+    x = nominal_map(post)
     # from here on the noise filters stay at this fit (shared with the extended models)
     like.fixed_filters = like.phi_sources
     x, log_post = local_fit(post, x)
@@ -196,19 +229,8 @@ def screen(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None
     base = parent.log_post      # the parent is not always the child at its null (flexible)
     vals = post(pts)
     best = pts[int(np.argmax(vals))] if np.any(np.isfinite(vals)) else x0
-    bnds = [_bounds(post)[j] for j in idx]
-
-    def neg(v: NDArray) -> float:
-        x = best.copy()
-        x[idx] = v
-        f = float(post(x[None])[0])
-        return -(f - base) if np.isfinite(f) else 1e300
-
-    res = so.minimize(neg, best[idx], method="Nelder-Mead", bounds=bnds,
-                      options={"maxfev": 40 * idx.size, "xatol": 1e-6, "fatol": 1e-3})
-    x = best.copy()
-    x[idx] = res.x
-    gain = -float(res.fun)
+    x, f = gauss_newton(post, best, cols=idx, noise=False)
+    gain = f - base
     if not np.isfinite(gain):
         gain = -np.inf
     return Screen(cand, gain, {fwd.params[j]: float(x[j]) for j in idx})

@@ -49,15 +49,64 @@ modal responses of a pass, 2 x ns x CHUNK_BINS doubles, stay in the L2 cache."""
 
 
 @njit(cache=True, nogil=True)
-def _residual_band_sums(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, Li, coef,
-                        starts, counts, chunks, width, out):  # pragma: no cover - compiled
+def _residual_rows(b, k0, n, lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, Li,
+                   coef, ur, ui, rr, ri):  # pragma: no cover - compiled
+    # The residual R_k of batch member b for the n bins from k0, into rr, ri (p, >= n).
     # Real arithmetic on (channel, bin) rows, so that the loops over bins are unit-stride
-    # and vectorise (numba's complex division and per-bin temporaries cost 10x); bins are
-    # taken a few hundred at a time (whole bands) so that u stays in cache.
-    nb, ns = lam.shape
+    # and vectorise (numba's complex division and per-bin temporaries cost 10x).
+    ns = lam.shape[1]
     m = Xr.shape[0]
     p = Er.shape[0]
     nl = coef.shape[1]
+    for s in range(ns):                         # u_s = (Bm_s . X_k - z_k xi_s) / (z_k - lam_s)
+        lr, li = lam[b, s].real, lam[b, s].imag
+        xr, xi_ = xi[b, s].real, xi[b, s].imag
+        urs, uis = ur[s], ui[s]
+        for k in range(n):
+            urs[k] = -(zr[k0 + k] * xr - zi[k0 + k] * xi_)
+            uis[k] = -(zr[k0 + k] * xi_ + zi[k0 + k] * xr)
+        for c in range(m):
+            br, bi = Bm[b, s, c].real, Bm[b, s, c].imag
+            xrc, xic = Xr[c], Xi[c]
+            for k in range(n):
+                urs[k] += xrc[k0 + k] * br - xic[k0 + k] * bi
+                uis[k] += xrc[k0 + k] * bi + xic[k0 + k] * br
+        for k in range(n):                        # times conj(z - lam) / |z - lam|^2
+            dr = zr[k0 + k] - lr
+            di = zi[k0 + k] - li
+            d = 1.0 / (dr * dr + di * di)
+            a, e = urs[k], uis[k]
+            urs[k] = (a * dr + e * di) * d
+            uis[k] = (e * dr - a * di) * d
+    for i in range(p):                          # R = E - (Cm u) / scale - lines . coef
+        rri, rii = rr[i], ri[i]
+        for k in range(n):
+            rri[k] = 0.0
+            rii[k] = 0.0
+        for s in range(ns):
+            cr, ci = Cm[b, i, s].real * inv_scale, Cm[b, i, s].imag * inv_scale
+            urs, uis = ur[s], ui[s]
+            for k in range(n):
+                rri[k] += cr * urs[k] - ci * uis[k]
+                rii[k] += cr * uis[k] + ci * urs[k]
+        eri, eii = Er[i], Ei[i]
+        for k in range(n):
+            rri[k] = eri[k0 + k] - rri[k]
+            rii[k] = eii[k0 + k] - rii[k]
+        for j in range(nl):
+            g = coef[b, j]
+            lrj, lij = Lr[j, i], Li[j, i]
+            for k in range(n):
+                rri[k] -= lrj[k0 + k] * g
+                rii[k] -= lij[k0 + k] * g
+
+
+@njit(cache=True, nogil=True)
+def _residual_band_sums(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, Li, coef,
+                        starts, counts, chunks, width, out):  # pragma: no cover - compiled
+    # Bins are taken a few hundred at a time (whole bands) so that u stays in cache.
+    nb, ns = lam.shape
+    p = Er.shape[0]
     ur, ui = np.empty((ns, width)), np.empty((ns, width))
     rr, ri = np.empty((p, width)), np.empty((p, width))
     for b in range(nb):
@@ -65,47 +114,8 @@ def _residual_band_sums(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, 
             b0, b1 = chunks[q], chunks[q + 1]
             k0 = starts[b0]
             n = starts[b1 - 1] + counts[b1 - 1] - k0
-            for s in range(ns):                 # u_s = (Bm_s . X_k - z_k xi_s) / (z_k - lam_s)
-                lr, li = lam[b, s].real, lam[b, s].imag
-                xr, xi_ = xi[b, s].real, xi[b, s].imag
-                urs, uis = ur[s], ui[s]
-                for k in range(n):
-                    urs[k] = -(zr[k0 + k] * xr - zi[k0 + k] * xi_)
-                    uis[k] = -(zr[k0 + k] * xi_ + zi[k0 + k] * xr)
-                for c in range(m):
-                    br, bi = Bm[b, s, c].real, Bm[b, s, c].imag
-                    xrc, xic = Xr[c], Xi[c]
-                    for k in range(n):
-                        urs[k] += xrc[k0 + k] * br - xic[k0 + k] * bi
-                        uis[k] += xrc[k0 + k] * bi + xic[k0 + k] * br
-                for k in range(n):                # times conj(z - lam) / |z - lam|^2
-                    dr = zr[k0 + k] - lr
-                    di = zi[k0 + k] - li
-                    d = 1.0 / (dr * dr + di * di)
-                    a, e = urs[k], uis[k]
-                    urs[k] = (a * dr + e * di) * d
-                    uis[k] = (e * dr - a * di) * d
-            for i in range(p):                  # R = E - (Cm u) / scale - lines . coef
-                rri, rii = rr[i], ri[i]
-                for k in range(n):
-                    rri[k] = 0.0
-                    rii[k] = 0.0
-                for s in range(ns):
-                    cr, ci = Cm[b, i, s].real * inv_scale, Cm[b, i, s].imag * inv_scale
-                    urs, uis = ur[s], ui[s]
-                    for k in range(n):
-                        rri[k] += cr * urs[k] - ci * uis[k]
-                        rii[k] += cr * uis[k] + ci * urs[k]
-                eri, eii = Er[i], Ei[i]
-                for k in range(n):
-                    rri[k] = eri[k0 + k] - rri[k]
-                    rii[k] = eii[k0 + k] - rii[k]
-                for j in range(nl):
-                    g = coef[b, j]
-                    lrj, lij = Lr[j, i], Li[j, i]
-                    for k in range(n):
-                        rri[k] -= lrj[k0 + k] * g
-                        rii[k] -= lij[k0 + k] * g
+            _residual_rows(b, k0, n, lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr,
+                           Li, coef, ur, ui, rr, ri)
             for band in range(b0, b1):          # P_b = sum_k R_k R_k^H
                 lo = starts[band] - k0
                 hi = lo + counts[band]
@@ -119,6 +129,19 @@ def _residual_band_sums(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, 
                         out[b, band, i, j] = ar + 1j * ai
                         if j > i:
                             out[b, band, j, i] = ar - 1j * ai
+
+
+@njit(cache=True, nogil=True)
+def _residual_dft(lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr, Li, coef,
+                  width, out_r, out_i):  # pragma: no cover - compiled
+    nb, ns = lam.shape
+    nf = zr.size
+    ur, ui = np.empty((ns, width)), np.empty((ns, width))
+    for b in range(nb):
+        for k0 in range(0, nf, width):
+            n = min(width, nf - k0)
+            _residual_rows(b, k0, n, lam, Bm, Cm, xi, Xr, Xi, zr, zi, Er, Ei, inv_scale, Lr,
+                           Li, coef, ur, ui, out_r[b, :, k0:], out_i[b, :, k0:])
 
 
 def _chunks(counts: NDArray, width: int) -> tuple[NDArray, int]:
@@ -165,27 +188,50 @@ def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: N
     ndarray
         (nb, n_bands, p, p), Hermitian per band.
     """
+    out = np.empty((lam.shape[0], starts.size, E.shape[1], E.shape[1]), dtype=complex)
+    chunks, width = _chunks(np.asarray(counts), CHUNK_BINS)
+    _residual_band_sums(*_arguments(lam, Bm, Cm, xi, X, z, E, scale, lines, coef),
+                        np.ascontiguousarray(starts, np.int64),
+                        np.ascontiguousarray(counts, np.int64), chunks, width, out)
+    return out
+
+
+def _arguments(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray, z: NDArray,
+               E: NDArray, scale: float, lines: NDArray | None, coef: NDArray | None
+               ) -> tuple:
+    """The kernels' common arguments, contiguous, in real arithmetic where they loop."""
     nb = lam.shape[0]
     p = E.shape[1]
     if lines is None or coef is None or coef.shape[1] == 0:
         lines = np.zeros((E.shape[0], p, 0), dtype=complex)
         coef = np.zeros((nb, 0))
-    out = np.empty((nb, starts.size, p, p), dtype=complex)
-    chunks, width = _chunks(np.asarray(counts), CHUNK_BINS)
-    c128, f64, i64 = np.complex128, np.float64, np.int64
+    c128, f64 = np.complex128, np.float64
     X = np.asarray(X, dtype=c128)
     z = np.asarray(z, dtype=c128)
     E = np.asarray(E, dtype=c128)
     L = np.asarray(lines, dtype=c128).transpose(2, 1, 0)              # (nl, p, nf)
-    _residual_band_sums(np.ascontiguousarray(lam, c128), np.ascontiguousarray(Bm, c128),
-                        np.ascontiguousarray(Cm, c128), np.ascontiguousarray(xi, c128),
-                        np.ascontiguousarray(X.real.T), np.ascontiguousarray(X.imag.T),
-                        np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag),
-                        np.ascontiguousarray(E.real.T), np.ascontiguousarray(E.imag.T),
-                        1.0 / scale, np.ascontiguousarray(L.real),
-                        np.ascontiguousarray(L.imag), np.ascontiguousarray(coef, f64),
-                        np.ascontiguousarray(starts, i64), np.ascontiguousarray(counts, i64),
-                        chunks, width, out)
+    return (np.ascontiguousarray(lam, c128), np.ascontiguousarray(Bm, c128),
+            np.ascontiguousarray(Cm, c128), np.ascontiguousarray(xi, c128),
+            np.ascontiguousarray(X.real.T), np.ascontiguousarray(X.imag.T),
+            np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag),
+            np.ascontiguousarray(E.real.T), np.ascontiguousarray(E.imag.T),
+            1.0 / scale, np.ascontiguousarray(L.real), np.ascontiguousarray(L.imag),
+            np.ascontiguousarray(coef, f64))
+
+
+def residual_dft(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray,
+                 z: NDArray, E: NDArray, scale: float, lines: NDArray | None = None,
+                 coef: NDArray | None = None) -> NDArray:
+    """The residual DFT R_k = E_k - (Cm u_k) / scale - lines_k . coef itself, (nb, nf, p):
+    the same arithmetic as :func:`residual_band_sums` (arguments as there), without the
+    band sums. With E = 0 and no lines it is minus the scaled response DFT."""
+    nb, nf, p = lam.shape[0], z.size, E.shape[1]
+    out_r, out_i = np.empty((nb, p, nf)), np.empty((nb, p, nf))
+    _residual_dft(*_arguments(lam, Bm, Cm, xi, X, z, E, scale, lines, coef),
+                  CHUNK_BINS, out_r, out_i)
+    out = np.empty((nb, nf, p), dtype=complex)
+    out.real = out_r.transpose(0, 2, 1)
+    out.imag = out_i.transpose(0, 2, 1)
     return out
 
 

@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter, welch
 
-from bayes_amb.control.discrete import ss_freqresp
+from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference import kernels
 from bayes_amb.inference.forward import ForwardModel, ModalBatch, dft_response
@@ -229,7 +229,7 @@ class WhittleLikelihood:
             self._last_sums = None
             return
         A, B, C, D = self.forward.noise_system(np.asarray(theta_ref, dtype=float))
-        H = ss_freqresp(A, B, C, D, self.z) / self.scale            # (nf, 4, 12)
+        H = ss_freqresp_modal(A, B, C, D, self.z) / self.scale            # (nf, 4, 12)
         phi = []
         for s in range(3):
             Hs = H[:, :, 4 * s:4 * (s + 1)]
@@ -240,10 +240,19 @@ class WhittleLikelihood:
         self._last_sums = None
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
-        """DFT of eps - S(theta) x (scaled) for a batch, and the stability mask."""
+        """DFT of eps - S(theta) x (scaled, minus any line terms) for a batch, and the
+        stability mask (the compiled kernel, or the numpy path with BAYES_AMB_KERNEL=numpy)."""
         mb, xi = self.modal_state(theta)
+        if kernels.use_compiled():
+            lines, coef = self._line_terms(theta)
+            return kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
+                                        self.scale, lines, coef), mb.stable
         Y = dft_response(mb, self.X, self.z, xi) / self.scale
-        return self.E[None] - Y, mb.stable
+        R = self.E[None] - Y
+        lines, coef = self._line_terms(theta)
+        if lines is not None:
+            R = R - np.einsum("kcl,bl->bkc", lines, coef)
+        return R, mb.stable
 
     def sum_squares(self, theta: NDArray) -> NDArray:
         """The paper's eq. 15 cost, sum |eps - S(theta) x|^2 (scaled, via Parseval), (nb,)."""

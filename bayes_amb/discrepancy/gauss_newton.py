@@ -1,0 +1,313 @@
+"""MAP search of the diagnosis on the linearised residual (Gauss-Newton, trust region).
+
+The whole-band likelihood (likelihood.py) depends on the parameters only through the
+residual DFT R_k(theta) = E_k - S(theta) x_k - lines_k . coef, and on the noise
+intensities only through the band spectra Psi_b(sigma). Linearised at theta_0,
+
+    R_k(theta_0 + delta) ~ R_k + sum_j J_kj delta_j,     J_kj = dR_k / dtheta_j,
+
+the band sums are quadratic in delta,
+
+    P_b(delta) = sum_{a,c = 0..q} w_a w_c M_b[a, c],   w = (1, delta),
+    M_b[a, c] = sum_{k in b} G_ka G_kc^H,   G_k0 = R_k, G_kj = J_kj,
+
+so the log posterior of the linearised model, exact in the noise intensities, costs the
+4 x 4 algebra of the bands only, with an analytic gradient. J comes from one batch of q + 1
+kernel rows (forward differences of R: R is close to linear in theta, so its differences
+are accurate to about the step, where differences of log L near the optimum are not). The
+linearised posterior is maximised inside a trust region (box of +-radius curvature scales
+on theta), the step kept when the exact log posterior improves, the region widened or
+narrowed by the ratio of actual to predicted gain (Nocedal & Wright, Numerical
+Optimization, ch. 4 and 10.3). Near the optimum the neglected term sum R d2R is noise
+against the excitation's signal, so few steps are needed: each costs q + 1 kernel rows,
+where an L-BFGS step with central-difference gradients costs 2 q + 1 and many more steps.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.optimize as so
+from numpy.typing import NDArray
+
+from bayes_amb.discrepancy.likelihood import P_CH, RobustWhittle
+from bayes_amb.inference.estimate import LogPosterior
+
+_LN10 = np.log(10.0)
+_STEP = 1e-5
+"""Forward-difference step of J (theta is dimensionless, of order 0.01-10)."""
+
+
+def band_moments(G: NDArray, starts: NDArray, counts: NDArray) -> NDArray:
+    """M_b[a, c] = sum_{k in b} G_a,k G_c,k^H for G (A, nf, 4): shape (A, A, n_bands, 4, 4).
+
+    Examples
+    --------
+    >>> G = np.arange(24.0).reshape(2, 3, 4) * (1 + 1j)
+    >>> M = band_moments(G, np.array([0, 1]), np.array([1, 2]))
+    >>> bool(np.allclose(M[0, 1, 1], np.outer(G[0, 1], G[1, 1].conj())
+    ...                  + np.outer(G[0, 2], G[1, 2].conj())))
+    True
+    """
+    n_a, nf, p = G.shape
+    X = np.ascontiguousarray(G.transpose(1, 0, 2).reshape(nf, n_a * p))
+    out = np.empty((n_a, n_a, starts.size, p, p), dtype=complex)
+    for b, (s, c) in enumerate(zip(starts, counts, strict=True)):
+        Xb = X[s:s + c]
+        Mb = (Xb.T @ Xb.conj()).reshape(n_a, p, n_a, p)
+        out[:, :, b] = Mb.transpose(0, 2, 1, 3)
+    return out
+
+
+def prior_gradient(post: LogPosterior, theta: NDArray) -> NDArray:
+    """d log p(theta) / d theta inside the support (uniform 0, normal, lognormal)."""
+    g = np.zeros(theta.size)
+    for j, pr in enumerate(post.priors.priors):
+        if pr.kind == "normal":
+            g[j] = -(theta[j] - pr.a) / pr.b**2
+        elif pr.kind == "lognormal" and theta[j] > 0:
+            g[j] = -((np.log(theta[j]) - pr.a) / pr.b**2 + 1.0) / theta[j]
+    return g
+
+
+@dataclass
+class LinearModel:
+    """The log posterior of the model linearised at x0 in the parameters ``cols`` (see
+    module docstring); the noise intensities enter exactly."""
+
+    post: LogPosterior
+    x0: NDArray
+    cols: NDArray
+    MT: NDArray            # (A, n_bands * 16, A): M[a, c] with c last, for Q = MT @ w
+
+    def __post_init__(self) -> None:
+        like = self.like
+        # the noise sources' band spectra as they enter Psi_b (likelihood.RobustWhittle)
+        self.phi = like.phi_sources * (like.n * (like.nu - like.shift))[None, :, None, None]
+        self._noise_key: bytes | None = None
+
+    @property
+    def like(self) -> RobustWhittle:
+        return self.post.likelihood  # type: ignore[return-value]
+
+    def point(self, delta: NDArray, ls: NDArray) -> NDArray:
+        x = self.x0.copy()
+        x[self.cols] += delta
+        x[self.post.p:] = ls
+        return x
+
+    def _noise_terms(self, ls: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray, bool]:
+        """sigma^2, Psi_b, sum_b nu_b log|Psi_b| and tr(Psi_b^-1 Phi_sb) at log10 sigma ls
+        (remembered: a search with the noise held evaluates one ls many times)."""
+        key = np.asarray(ls, dtype=float).tobytes()
+        if key != self._noise_key:
+            like = self.like
+            sig2 = 10.0 ** (2 * np.asarray(ls, dtype=float))
+            Psi = np.tensordot(sig2, self.phi, axes=(0, 0))
+            s0, ld0 = np.linalg.slogdet(Psi)
+            ok = bool(np.all(s0.real > 0))
+            tr_psi = (np.einsum("bij,sbji->sb", np.linalg.inv(Psi), self.phi).real if ok
+                      else np.zeros((3, like.starts.size)))
+            self._noise_cache = (sig2, Psi, float(np.sum(like.nu * ld0)), tr_psi, ok)
+            self._noise_key = key
+        return self._noise_cache
+
+    def value_grad(self, delta: NDArray, ls: NDArray) -> tuple[float, NDArray, NDArray]:
+        """Linearised log posterior and its gradient along delta (cols) and log10 sigma."""
+        like = self.like
+        nb = like.starts.size
+        w = np.concatenate([[1.0], delta])
+        Q = (self.MT @ w).reshape(w.size, nb, P_CH, P_CH)       # Q_a = sum_c w_c M[a, c]
+        P = np.tensordot(w, Q, axes=(0, 0))
+        sig2, Psi, nu_ld0, tr_psi, ok = self._noise_terms(ls)
+        s1, ld1 = np.linalg.slogdet(Psi + P)
+        if not (ok and np.all(s1.real > 0)):
+            return -np.inf, np.zeros(delta.size), np.zeros(3)
+        wt = like.nu + like.counts
+        ll = float(np.sum(like._gamma_term - wt * ld1 - P_CH * like.counts * np.log(np.pi)))
+        ll += nu_ld0 - 2 * P_CH * like.k.size * np.log(like.scale) + like.jacobian
+        theta = self.x0[:self.post.p].copy()
+        theta[self.cols] += delta
+        lp = self.post.priors.log_prior(theta[None], np.asarray(ls)[None])[0]
+        K = np.linalg.inv(Psi + P)
+        tr_kq = np.einsum("bij,abji->ab", K, Q[1:]).real
+        g_delta = -2.0 * tr_kq @ wt + prior_gradient(self.post, theta)[self.cols]
+        tr_k = np.einsum("bij,sbji->sb", K, self.phi).real
+        g_ls = 2 * _LN10 * sig2 * (tr_psi @ like.nu - tr_k @ wt)
+        return ll + float(lp), g_delta, g_ls
+
+
+def linearise(post: LogPosterior, x: NDArray, cols: NDArray, step: float = _STEP
+              ) -> LinearModel | None:
+    """The linear model at x in the parameters cols: R and J from one batch of
+    cols.size + 1 kernel rows (steps taken inward at an upper prior bound). None where a
+    row is not stabilised."""
+    like: RobustWhittle = post.likelihood  # type: ignore[assignment]
+    theta = x[:post.p]
+    h = np.full(cols.size, step)
+    for i, j in enumerate(cols):
+        hi = post.bounds()[j][1]
+        if hi is not None and theta[j] + step > hi:
+            h[i] = -step
+    rows = np.tile(theta, (cols.size + 1, 1))
+    rows[1 + np.arange(cols.size), cols] += h
+    R, stable = like.residual_dft(rows)
+    post.n_evals += rows.shape[0]
+    if not np.all(stable):
+        return None
+    G = np.concatenate([R[:1], (R[1:] - R[:1]) / h[:, None, None]])
+    M = band_moments(G, like.starts, like.counts)
+    n_a = G.shape[0]
+    MT = np.ascontiguousarray(M.reshape(n_a, n_a, -1).transpose(0, 2, 1))
+    return LinearModel(post, np.asarray(x, dtype=float).copy(), cols, MT)
+
+
+def _curvature_scales(lin: LinearModel, ls: NDArray, noise: bool, width: NDArray
+                      ) -> NDArray:
+    """1/sqrt(-d2 m / dv_j2) per free coordinate of the linear model (differences of its
+    analytic gradient), the prior width where the curvature is not usable."""
+    q = lin.cols.size
+    d = q + (3 if noise else 0)
+    out = np.empty(d)
+    zero = np.zeros(q)
+    for j in range(d):
+        eps = 1e-6 if j < q else 1e-4
+        g = []
+        for s in (eps, -eps):
+            dv = zero.copy()
+            lsv = ls.copy()
+            if j < q:
+                dv[j] = s
+            else:
+                lsv[j - q] += s
+            _, gd, gl = lin.value_grad(dv, lsv)
+            g.append(gd[j] if j < q else gl[j - q])
+        curv = -(g[0] - g[1]) / (2 * eps)
+        out[j] = 1.0 / np.sqrt(curv) if np.isfinite(curv) and curv > 0 else width[j]
+    return np.clip(out, 1e-12, width)
+
+
+def _maximise_model(lin: LinearModel, ls0: NDArray, noise: bool, lo: NDArray, hi: NDArray,
+                    scale: NDArray) -> tuple[NDArray, NDArray, float]:
+    """Maximise the linear model over delta (and log10 sigma if noise) within [lo, hi]
+    (in the same units), in coordinates scaled by ``scale``; returns delta, ls, gain."""
+    q = lin.cols.size
+    f0 = lin.value_grad(np.zeros(q), ls0)[0]
+
+    def split(u: NDArray) -> tuple[NDArray, NDArray]:
+        v = u * scale
+        return v[:q], (ls0 + v[q:] if noise else ls0)
+
+    def fun(u: NDArray) -> tuple[float, NDArray]:
+        delta, ls = split(u)
+        f, gd, gl = lin.value_grad(delta, ls)
+        if not np.isfinite(f):
+            return 1e300, np.zeros_like(u)
+        g = np.concatenate([gd, gl]) if noise else gd
+        return -(f - f0), -g * scale
+
+    bounds = list(zip(lo / scale, hi / scale, strict=True))
+    res = so.minimize(fun, np.zeros(scale.size), jac=True, method="L-BFGS-B", bounds=bounds,
+                      options={"maxiter": 500, "ftol": 1e-14, "gtol": 1e-9})
+    delta, ls = split(res.x)
+    gain = -float(res.fun)
+    return delta, ls, (gain if np.isfinite(gain) and gain > 0 else 0.0)
+
+
+def gauss_newton(post: LogPosterior, x0: NDArray, cols: NDArray | None = None,
+                 noise: bool = True, radius: float = 3.0, tol: float = 1e-6,
+                 max_iter: int = 60) -> tuple[NDArray, float]:
+    """Maximise the log posterior from x0 over the parameters cols (default all) and, if
+    noise, the noise intensities (module docstring). Stops when the linear model predicts
+    less than tol nats; returns the point and its (exact) log posterior."""
+    p = post.p
+    cols = np.arange(p) if cols is None else np.asarray(cols)
+    bnds = post.bounds()
+    blo = np.array([-np.inf if b[0] is None else b[0] for b in bnds])
+    bhi = np.array([np.inf if b[1] is None else b[1] for b in bnds])
+    width = np.where(np.isfinite(bhi - blo), bhi - blo, 1.0)
+    x = np.asarray(x0, dtype=float).copy()
+    f = float(post(x[None])[0])
+    if not np.isfinite(f):
+        return x, f
+    free = np.concatenate([cols, np.arange(p, p + 3)]) if noise else cols
+    lin = None
+    for _ in range(max_iter):
+        if lin is None:
+            lin = linearise(post, x, cols)
+            if lin is None:
+                break
+            scale = _curvature_scales(lin, x[p:], noise, width[free])
+        q = cols.size
+        lo = blo[free] - x[free]
+        hi = bhi[free] - x[free]
+        lo[:q] = np.maximum(lo[:q], -radius * scale[:q])
+        hi[:q] = np.minimum(hi[:q], radius * scale[:q])
+        delta, ls, pred = _maximise_model(lin, x[p:], noise, lo, hi, scale)
+        if pred < tol:
+            break
+        x_new = lin.point(delta, ls)
+        f_new = float(post(x_new[None])[0])
+        gain = f_new - f
+        rho = gain / pred
+        if np.isfinite(f_new) and gain > 0:
+            on_edge = np.any(np.abs(np.abs(delta) - radius * scale[:q]) < 1e-9 * scale[:q])
+            x, f = x_new, f_new
+            lin = None
+            if rho > 0.75 and on_edge:
+                radius *= 2.0
+            elif rho < 0.25:
+                radius *= 0.25
+            if gain < tol:
+                break
+        else:
+            radius *= 0.25
+            if radius < 1e-6:
+                break
+    return x, f
+
+
+def _quadratic(d: NDArray, H: NDArray, g: NDArray) -> tuple[float, NDArray]:
+    return float(d @ H @ d + 2 * g @ d), 2 * (H @ d + g)
+
+
+def least_squares_start(post: LogPosterior, theta0: NDArray, max_iter: int = 8
+                        ) -> NDArray:
+    """The paper's eq. 15 estimate, argmin sum_k |R_k(theta)|^2 over the prior box, by
+    Gauss-Newton: on the linear model the cost is w^T T w with T[a, c] = sum_b Re tr
+    M_b[a, c], a bounded quadratic; a step is kept while the exact cost falls."""
+    like: RobustWhittle = post.likelihood  # type: ignore[assignment]
+    p = post.p
+    cols = np.arange(p)
+    bnds = post.bounds()[:p]
+    lo = np.array([-np.inf if b[0] is None else b[0] for b in bnds])
+    hi = np.array([np.inf if b[1] is None else b[1] for b in bnds])
+    theta = np.clip(np.asarray(theta0, dtype=float), lo, hi)
+    x = np.concatenate([theta, np.zeros(3)])
+    cost = float(like.sum_squares(theta[None])[0])
+    for _ in range(max_iter):
+        lin = linearise(post, x, cols)
+        if lin is None:
+            break
+        n_a = cols.size + 1
+        T = np.trace(lin.MT.reshape(n_a, -1, P_CH, P_CH, n_a), axis1=2, axis2=3)
+        T = T.sum(axis=1).real                                       # (A, A)
+        res = so.minimize(_quadratic, np.zeros(p), args=(T[1:, 1:], T[1:, 0]), jac=True,
+                          method="L-BFGS-B",
+                          bounds=list(zip(lo - theta, hi - theta, strict=True)),
+                          options={"maxiter": 500, "ftol": 1e-15, "gtol": 1e-12})
+        step = res.x
+        for _ in range(10):
+            new = float(like.sum_squares((theta + step)[None])[0])
+            if new < cost:
+                break
+            step = 0.5 * step
+        else:
+            break
+        converged = cost - new < 1e-10 * cost
+        theta, cost = theta + step, new
+        x[:p] = theta
+        if converged:
+            break
+    return theta

@@ -1,0 +1,128 @@
+"""The diagnosis' Gauss-Newton MAP search (bayes_amb.discrepancy.gauss_newton).
+
+Identity tests: the linear model at its own point is the exact log posterior, its gradient
+is the exact gradient (up to the forward-difference step of J), and it is exact in the
+noise intensities. Search tests: from the same start it reaches the optimum that L-BFGS-B
+with central-difference gradients reaches (a stationary point of the exact posterior), and
+the eq. 15 estimate equals identification's least_squares_theta.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.discrepancy import ActuatorLag, SensorGain
+from bayes_amb.discrepancy import gauss_newton as gn
+from bayes_amb.discrepancy.select import build, extend, fit_nominal
+from bayes_amb.inference.estimate import least_squares_theta, local_search
+from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.offline import dual_youla_eps
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
+
+NAMES = ("k_Ax", "k_By", "c_Bx", "c_By")
+
+
+def _case(effects):
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3, "c_Bx": 0.1}, dt=1e-4,
+                           duration=0.3, noise_rms=1e-7, r2_rms=0.02, seed=7,
+                           effects=tuple(parse_effect(e) for e in effects))
+    rec = simulate_recording(rig, ctrl, cfg)[0]
+    fm = ForwardModel(rec, NAMES)
+    eps = dual_youla_eps(fm.parts, np.asarray(rec.y), np.asarray(rec.u))
+    return rec, eps
+
+
+@pytest.fixture(scope="module")
+def case():
+    """A hidden 1500 Hz actuator lag."""
+    return _case(["actuator_lag:bandwidth_hz=1500"])
+
+
+@pytest.fixture(scope="module")
+def clean():
+    return _case(["sensor_gain:channel=By,gain=0.05"])
+
+
+def _fd_gradient(post, x, h):
+    g = np.empty(x.size)
+    for j in range(x.size):
+        e = np.zeros(x.size)
+        e[j] = h[j]
+        g[j] = (post((x + e)[None])[0] - post((x - e)[None])[0]) / (2 * h[j])
+    return g
+
+
+def test_linear_model_is_exact_at_its_point(case):
+    rec, eps = case
+    _, like, post = build(rec, NAMES, eps)
+    x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])
+    like.set_noise_reference(x[:4])
+    lin = gn.linearise(post, x, np.arange(4))
+    f, g_theta, g_ls = lin.value_grad(np.zeros(4), x[4:])
+    exact = post(x[None])[0]
+    assert abs(f - exact) <= 1e-9 * abs(exact)
+    # exact in the noise intensities: the model away from x along log10 sigma only
+    ls = x[4:] + np.array([0.3, -0.5, 0.2])
+    f_ls = lin.value_grad(np.zeros(4), ls)[0]
+    exact_ls = post(np.r_[x[:4], ls][None])[0]
+    assert abs(f_ls - exact_ls) <= 1e-9 * abs(exact_ls)
+    h = np.r_[np.full(4, 1e-5), np.full(3, 1e-4)]
+    g_fd = _fd_gradient(post, x, h)
+    # J by forward differences (step 1e-5) against central differences of log p: both
+    # carry an O(h) or O(h^2) error, small against the gradient itself
+    g = np.r_[g_theta, g_ls]
+    assert np.all(np.abs(g - g_fd) <= 1e-4 * np.abs(g_fd) + 1e-2), (g, g_fd)
+    # a wrong Jacobian column is seen
+    lin.MT[1] *= 1.01
+    assert abs(lin.value_grad(np.zeros(4), x[4:])[1][0] - g_fd[0]) > 1e-3 * abs(g_fd[0])
+
+
+def test_search_reaches_the_lbfgs_optimum(clean):
+    rec, eps = clean
+    nominal = fit_nominal(rec, NAMES, eps)
+    _, like, post = extend(nominal, SensorGain("sensor_gain", "By"))
+    x0 = np.r_[np.zeros(4), 0.0, nominal.log10_sigma]
+    like.set_noise_reference(x0[:post.p])
+    x_lb, _ = local_search(post, "lbfgs", x0)
+    f_lb = post(x_lb[None])[0]
+    x_gn, f_gn = gn.gauss_newton(post, x0)
+    assert f_gn >= f_lb - 1e-5
+    assert np.allclose(x_gn, x_lb, rtol=0, atol=2e-4), (x_gn, x_lb)
+    # stationary: no coordinate gains more than 1e-4 nats in one curvature step
+    h = np.r_[np.full(post.p, 1e-5), np.full(3, 1e-4)]
+    g = _fd_gradient(post, x_gn, h)
+    H = np.array([(post((x_gn + e)[None])[0] - 2 * f_gn + post((x_gn - e)[None])[0])
+                  for e in np.diag(h * 10)]) / (h * 10) ** 2
+    assert np.all(0.5 * g**2 / np.abs(H) < 1e-4)
+
+
+def test_search_leaves_a_bound_the_nominal_fit_absorbed_the_lag_on(case):
+    """The nominal fit takes the lag as negative damping (c_Bx, c_By on the -0.8 bound).
+    From there L-BFGS-B (projected, central differences) stays on the bound; the
+    Gauss-Newton step of the linear model leaves it and gains many nats."""
+    rec, eps = case
+    nominal = fit_nominal(rec, NAMES, eps)
+    assert nominal.value("c_By") == pytest.approx(-0.8)
+    _, like, post = extend(nominal, ActuatorLag("actuator_lag", "both"))
+    x0 = np.r_[nominal.params, 0.05, nominal.log10_sigma]
+    like.set_noise_reference(x0[:post.p])
+    x_lb, _ = local_search(post, "lbfgs", x0)
+    x_gn, f_gn = gn.gauss_newton(post, x0)
+    _, f_ref = gn.gauss_newton(post, np.r_[np.zeros(4), x0[4:]])
+    assert f_gn > post(x_lb[None])[0] + 10 and x_lb[3] == pytest.approx(-0.8)
+    assert f_gn == pytest.approx(f_ref, abs=1e-5) and x_gn[3] > -0.5
+
+
+def test_least_squares_start_equals_the_identification_estimate(case):
+    rec, eps = case
+    _, _, post = build(rec, NAMES, eps)
+    theta_gn = gn.least_squares_start(post, np.zeros(4))
+    theta_lb = least_squares_theta(post, "lbfgs", np.zeros(4))
+    cost_gn, cost_lb = post.likelihood.sum_squares(np.vstack([theta_gn, theta_lb]))
+    assert cost_gn <= cost_lb * (1 + 1e-10)
+    assert np.allclose(theta_gn, theta_lb, rtol=0, atol=1e-5)
