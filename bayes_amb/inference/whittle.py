@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter, welch
 
-from bayes_amb.control.discrete import ss_freqresp_modal
+from bayes_amb.control.discrete import ss_freqresp, ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference import kernels
 from bayes_amb.inference.forward import ForwardModel, ModalBatch, dft_response
