@@ -115,7 +115,7 @@ def test_search_leaves_a_bound_the_nominal_fit_absorbed_the_lag_on(case):
     x_gn, f_gn = gn.gauss_newton(post, x0)
     _, f_ref = gn.gauss_newton(post, np.r_[np.zeros(4), x0[4:]])
     assert f_gn > post(x_lb[None])[0] + 10 and x_lb[3] == pytest.approx(-0.8)
-    assert f_gn == pytest.approx(f_ref, abs=1e-5) and x_gn[3] > -0.5
+    assert f_gn >= f_ref - 1e-5 and x_gn[3] > -0.5     # as high as from a neutral start
 
 
 def test_least_squares_start_equals_the_identification_estimate(case):
