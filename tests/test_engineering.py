@@ -5,7 +5,8 @@ Reference tests build the sampled closed loop of the full 320-state plant by han
 plant of the simulator, scipy's matrix exponential, u = K y) and compare eigenvalues and
 sensitivities; identity tests check the log-decrement identities and the alias-free
 continuous equivalent; the statistical test checks that the 90 % interval of every derived
-quantity covers its truth in >= 85 % of 30 simulated recordings.
+quantity covers its truth in >= 85 % of 30 simulated recordings (on average; >= 23/30
+each).
 """
 
 from __future__ import annotations
@@ -197,22 +198,30 @@ MIN_HITS = 23
 = 0.008, so fewer than 23 is evidence of miscalibration at 1 %. The issue's ">= 85 % of 30"
 (26) is not a test a calibrated interval passes reliably: P(hits < 26) = 0.18 per quantity,
 and all of ~8 distinct functions of (k_By, c_By) pass together in only ~45 % of seed sets
-(simulated with calibrated Gaussian z-scores). It is asserted on the mean over quantities."""
+(simulated with calibrated Gaussian z-scores). For rigid 3's frequency it is not even the
+expected count: see test_intervals_cover_the_truth_in_30_recordings. It is asserted on the
+mean over quantities."""
 
 
-@pytest.mark.slow
 def test_intervals_cover_the_truth_in_30_recordings():
     """Reduced truth, k_By = 0.3, c_By = 0.2, 0.5 s at 1 kHz, sensor noise 0.3 um; k_By and
     c_By estimated (MAP + Laplace with correlations, 1000 draws each, through draws_from as
     a report takes them), quantities from the reduced plant. Every quantity that depends on
     theta: >= 23 of 30 (MIN_HITS); mean over the quantities >= 85 %.
 
-    Measured at the commit of this test (35-60 s on 2 cores): 23 quantities; rigid 3
+    Measured (35-60 s on 2 cores, 230 s on a loaded one): 23 quantities; rigid 3
     frequency and its separation margin 23/30, the others 26-27/30, mean 26.1/30 (87 %).
-    Rigid 3 and 4 are a heavily damped, nearly coincident pair (-802 + 921j and -836 + 955j
-    rad/s at the truth): labelled by ascending frequency, their frequencies are strongly
-    nonlinear in c_By (the local slope df/dc_By ranges from -8.5 to +19 Hz over the 30
-    posteriors), and the posterior median of rigid 3's is biased low (z mean -0.7).
+    Rigid 3 is not mislabelled: by eigenvalue continuation the modes keep their
+    frequency order over the whole posterior (test_rigid_modes_keep_their_frequency_order),
+    and relabelling every 10th draw by MAC against the posterior median's modes changed no
+    label in any of the 30 recordings. Its frequency sits next to a ridge: rigid 3 and 4
+    veer near an exceptional point at (k_By, c_By) = (0.27, 0.16) (eigenvectors MAC 0.96 at
+    the truth), and at k_By = 0.3 rigid 3's frequency peaks at c_By = 0.19 (146.71 Hz; truth
+    146.66 Hz). Every posterior draw away from the ridge gives a lower value, so the 7 misses
+    all have the truth above the interval. An equal-tailed interval of such a function
+    undercovers even under an exactly calibrated posterior: 86.8 % in 2000 simulated
+    Gaussian posteriors with this test's sd (0.003, 0.018), i.e. 26.0 expected hits of 30,
+    and 23 or fewer with probability ~0.1. So >= 26/30 cannot be asserted for it.
 
     Before this test, with k_By and c_By estimated: 24-28/30. The likelihood's prewhitening
     FIR was designed from eps, whose low band is S(theta) x, and leakage left 1.39 x the
@@ -245,3 +254,27 @@ def test_interval_is_the_image_of_the_parameter_quantiles(rig, ctrl):
     f1 = r.quantities[f"rigid 1: frequency @ {SPEED:.0f} rpm"]
     assert min(ends) - 1e-3 <= f1.lo <= f1.hi <= max(ends) + 1e-3   # Hz
     assert f1.lo < f1.hi
+
+
+def test_rigid_modes_keep_their_frequency_order(rig, ctrl):
+    """Naming the rigid modes by ascending frequency gives each draw the mode that eigenvalue
+    continuation gives it, over the region the coverage test's posteriors cover (k_By 0.28
+    to 0.32, c_By 0.11 to 0.33): stepping c_By by 0.005 moves the modes by at most ~5 rad/s,
+    less than half the smallest distance of rigid 3 and 4 (measured 19 rad/s, at k_By 0.28,
+    c_By 0.17), so nearest-eigenvalue tracking from step to step is unambiguous and must
+    keep the frequency order. Mode shapes cannot do it here: the two
+    eigenvectors have MAC 0.96 at the truth (they veer near an exceptional point at about
+    (0.27, 0.16), outside the region)."""
+    for k in (0.28, 0.30, 0.32):
+        prev = None
+        for c in np.arange(0.11, 0.3325, 0.005):
+            lam = closed_loop_modes(rig, ctrl[1e-3], SPEED, {"k_By": k, "c_By": c},
+                                    "reduced").lam[:4]
+            assert np.all(np.diff(lam.imag) > 0), (k, c, lam)
+            if prev is not None:
+                dist = np.abs(lam[:, None] - prev[None, :])       # (new, previous)
+                step = np.diag(dist).max()
+                gap = min(np.abs(lam[2] - lam[3]), np.abs(prev[2] - prev[3]))
+                assert step < gap / 2, (k, c, step, gap)
+                assert np.array_equal(np.argmin(dist, axis=1), np.arange(4)), (k, c)
+            prev = lam

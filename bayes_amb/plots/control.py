@@ -71,7 +71,7 @@ def plot_pole_zero_discrete(sets: Sequence[PoleZeroSet], title: str, dt: float,
     pts = pts[np.isfinite(pts)]
     near = pts[np.abs(pts - 1) < 0.2]
     zoom = near.size >= max(2, pts.size // 2)
-    fig = new_figure((8.0, 4.2) if zoom else (6.4, 4.6))
+    fig = new_figure((8.0, 4.2) if zoom else (6.4, 3.9))
     axes = fig.subplots(1, 2) if zoom else [fig.add_subplot()]
     phi = np.linspace(0.0, 2 * np.pi, 400)
     for a in axes:
@@ -108,7 +108,7 @@ def plot_sensitivity(curves: Sequence[tuple[str, SensitivityData]]) -> Figure:
     with the ISO 14839-3 zones shaded (A below 9.5 dB, B to 12 dB, C to 14 dB, D above)."""
     from matplotlib.patches import Patch
 
-    fig = new_figure((8.0, 5.4))
+    fig = new_figure((8.0, 4.9))
     axes = fig.subplots(2, 2, sharex=True, sharey=True).ravel()
     limits = [20 * np.log10(lim) for _, lim in ISO_ZONES]
     bands = list(zip(limits, [*limits[1:], 40.0], strict=True))

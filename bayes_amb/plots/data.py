@@ -37,7 +37,7 @@ def plot_time_window(t: NDArray, x: NDArray, eps: NDArray, port: str,
     """Excitation x and innovation eps over a time window (s), one row per channel."""
     sym, xunit, xs = excitation_label(port)
     m = (t >= window[0]) & (t <= window[1])
-    fig, axes = _grid(4, 2, (8.0, 6.4), sharex=True)
+    fig, axes = _grid(4, 2, (8.0, 5.6), sharex=True)
     for j, ch in enumerate(CHANNELS):
         axes[j, 0].step(t[m], xs * x[m, j], where="post", color="#1f4e9a", lw=0.9)
         axes[j, 1].plot(t[m], UM * eps[m, j], color="#d9541e", lw=0.9)
@@ -62,7 +62,7 @@ def plot_spectra(freq_hz: NDArray, curves: Sequence[tuple[str, NDArray]], ylabel
     """
     from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
 
-    fig, axes = _grid(2, 2, (8.0, 5.4), sharex=True, sharey=True)
+    fig, axes = _grid(2, 2, (8.0, 4.8), sharex=True, sharey=True)
     f = freq_hz[1:]
     colours = ("#1f4e9a", "#d9541e", "0.45", "#2a9d48")
     order = list(dict.fromkeys(label for label, _ in curves))   # same label, same colour

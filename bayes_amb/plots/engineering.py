@@ -119,7 +119,7 @@ def plot_frf(res: Any, which: str = "plant") -> Figure:
     meas = res.plant_measured if which == "plant" else res.compliance_measured
     unit = "m/A" if which == "plant" else "m/N"
     f = res.freq_hz
-    fig = new_figure((7.2, 6.4 if which == "plant" else 5.2))
+    fig = new_figure((7.2, 4.9 if which == "plant" else 3.9))    # both on one A4 page
     if which == "plant":
         grid = fig.add_gridspec(4, 2, height_ratios=[3, 1, 3, 1])
         mags = [fig.add_subplot(grid[2 * (c // 2), c % 2]) for c in range(4)]
@@ -160,7 +160,7 @@ def plot_predictive_frf(freq_hz: Any, measured: Any, coherence: Any, draws: Any,
     the recording (x as instrument) against S(theta) for posterior draws. On a log scale
     both are visible even where S(theta) x is small against eps; the coherence says where
     the measured curve is data and where it is noise."""
-    fig = new_figure((7.2, 6.4))
+    fig = new_figure((7.2, 4.5))            # ~115 mm on A4: shares its page with a figure
     grid = fig.add_gridspec(4, 2, height_ratios=[3, 1, 3, 1])
     for c, ch in enumerate(CHANNELS):
         ax = fig.add_subplot(grid[2 * (c // 2), c % 2])

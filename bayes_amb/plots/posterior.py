@@ -81,7 +81,7 @@ def plot_rank(draws: dict[str, NDArray], labels: dict[str, str], n_bins: int | N
         n_bins = int(np.clip(draws[names[0]].shape[1] // 10, 4, 20))
     cols = min(3, len(names))
     rows = -(-len(names) // cols)
-    fig, axes = _grid(rows, cols, (2.75 * cols + 0.5, 2.3 * rows + 0.6))
+    fig, axes = _grid(rows, cols, (2.3 * cols + 0.3, 1.25 * rows + 0.5))
     for ax, n in zip(axes.ravel(), names, strict=False):
         d = draws[n]
         ranks = stats.rankdata(d.ravel()).reshape(d.shape)
