@@ -47,7 +47,7 @@ class SamplerRun:
 
 
 LAPLACE_SWEEP_WEIGHT = 0.8   # per step: the Laplace sweep, else differential evolution
-NOISE_SUBSTEPS = 4           # differential-evolution steps of the noise block per sweep
+NOISE_SUBSTEPS = 2           # differential-evolution steps of the noise block per sweep
 
 
 def ensemble_moves(laplace: tuple[NDArray, NDArray] | None = None, ndim: int | None = None
@@ -68,7 +68,7 @@ def ensemble_moves(laplace: tuple[NDArray, NDArray] | None = None, ndim: int | N
     the differential-evolution move above on all coordinates. Every part leaves the
     posterior invariant, so the mixture does whatever the Laplace approximation's quality;
     that only decides how fast theta decorrelates (on the 8-parameter benchmark tau fell
-    from ~50 steps to ~2, the noise intensities' from ~50 to ~4).
+    from ~50 steps to ~2, the noise intensities' from ~50 to ~8).
 
     Fresh objects per sampler: emcee's DEMove fixes its scale to the dimension of the first
     ensemble it sees. emcee's DESnookerMove is not used: in emcee <= 3.1.6 its proposal is
