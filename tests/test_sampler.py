@@ -83,7 +83,7 @@ LAPLACE_CASES = {
 def test_laplace_mixture_samples_a_standard_normal(case):
     """Mean and sd of every dimension against the standard normal: the sd check above,
     and each mean within 4 of its standard errors 1 / sqrt(ESS) (11 dimensions: a correct
-    sampler fails with probability ~7e-4). 1500 steps give ESS >= 4000 per dimension."""
+    sampler fails with probability ~7e-4). 1500 steps give ESS >= 650 per dimension."""
     draws, ess = sampled(1, LAPLACE_CASES[case], steps=1500)
     sd = draws.reshape(-1, D).std(axis=0)
     mean_sd, se = float(sd.mean()), float(np.sqrt(np.mean(1 / (2 * ess)) / D))
