@@ -24,7 +24,8 @@ KEYS = {
                    "kernel_speedup", "kernel_rel_err"},
     "posterior": {"posterior_s", "wall_s", "ess_per_s", "converged", "max_r_hat", "min_ess",
                   "n_tau", "likelihood_evals", "baseline_eval_us",
-                  "baseline_posterior_s_estimated", "speedup_estimated", "parameters"},
+                  "baseline_posterior_s_estimated", "speedup_estimated", "parameters",
+                  "cpu_s", "de", "cpu_speedup", "wall_speedup", "target_s"},
     "simulate": {"simulate_s", "baseline_s", "speedup", "n_states", "n_samples",
                  "requirement_s", "max_rel_diff"},
     "map": {"lbfgs", "nelder_mead", "speedup", "eval_ratio"},
@@ -80,6 +81,11 @@ def test_posterior_quick_reports_each_parameter(bench_json):
     for p in post["parameters"]:
         assert p["bias"] == pytest.approx(p["mean"] - p["true"])
         assert p["sd"] > 0
+    # the side-by-side run with the sampler before issue 16, on the same recording
+    de = post["de"]
+    assert de["moves"] == "de" and de["steps"] == post["steps"]
+    assert [p["name"] for p in de["parameters"]] == names
+    assert de["cpu_s"] > 0 and post["cpu_s"] > 0
 
 
 def test_text_table_names_every_benchmark(bench_json):

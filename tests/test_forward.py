@@ -298,3 +298,32 @@ def test_model_prewhitening_leaves_the_modelled_residual_power_in_the_low_bins(r
         low_model.append(np.average(ratio[low], weights=like.counts[low]))
     assert abs(np.mean(low_model) - 1.0) < 0.15, low_model
     assert np.mean(low_data) > 1.15, low_data
+
+
+def test_remembered_band_sums_give_the_same_log_likelihood(noisy_like):
+    """WhittleLikelihood.remember_rows (the sampler's noise-only moves): batches mixing
+    remembered rows, new rows and repeats give what a fresh evaluation gives (the batch of a
+    row may differ, hence 1e-10, not 0); a changed noise reference forgets the rows; the
+    memory keeps at most its capacity."""
+    like = noisy_like
+    like.set_noise_reference(np.array([0.3]))
+    th = np.array([[0.3], [0.28], [0.31], [0.29]])
+    ls = np.tile(LOG10_SIGMA, (4, 1)) + np.array([[0.0, 0, 0], [0.1, 0, 0], [0, -1, 0],
+                                                   [0, 0, 0.2]])
+    ref = like(th, ls)
+    try:
+        like.remember_rows(3)
+        first = like(th[:2], ls[:2])
+        mixed = like(th[[1, 2, 1, 3, 0]], ls[[1, 2, 1, 3, 0]])
+        np.testing.assert_allclose(first, ref[:2], rtol=1e-10)
+        np.testing.assert_allclose(mixed, ref[[1, 2, 1, 3, 0]], rtol=1e-10)
+        assert len(like._row_sums) == 3
+        like.set_noise_reference(np.array([0.25]))
+        assert len(like._row_sums) == 0
+        moved = like(th, ls)
+    finally:
+        like.remember_rows(0)
+        like.set_noise_reference(np.array([0.3]))
+    like.set_noise_reference(np.array([0.25]))
+    np.testing.assert_allclose(moved, like(th, ls), rtol=1e-10)
+    like.set_noise_reference(np.array([0.3]))

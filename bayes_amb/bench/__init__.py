@@ -32,6 +32,7 @@ from bayes_amb.bench.results import (
     ParamRecovery,
     PosteriorBench,
     Result,
+    SamplerSide,
     SimulateBench,
     environment,
     report,
@@ -39,7 +40,7 @@ from bayes_amb.bench.results import (
 
 __all__ = ["BENCHMARKS", "DEFAULT_BENCHMARKS", "BenchmarkError", "DiagnoseBench",
            "LikelihoodBench", "MapBench", "MapRun", "ParamRecovery", "PosteriorBench", "Result",
-           "SimulateBench", "bench_cli", "bench_diagnose", "bench_likelihood", "bench_map",
-           "bench_posterior", "bench_simulate", "closed_loop_ss", "environment",
+           "SamplerSide", "SimulateBench", "bench_cli", "bench_diagnose", "bench_likelihood",
+           "bench_map", "bench_posterior", "bench_simulate", "closed_loop_ss", "environment",
            "make_recording", "median_time", "naive_eval_us", "naive_log_likelihood",
            "report", "run_benchmarks"]

@@ -34,6 +34,7 @@ from bayes_amb.bench.results import (
     ParamRecovery,
     PosteriorBench,
     Result,
+    SamplerSide,
     SimulateBench,
 )
 from bayes_amb.control.export import export_controller, reference_controller
@@ -183,12 +184,36 @@ def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
             1e6 * float(np.median(times["numpy"])) / n, rel)
 
 
+POSTERIOR_TARGET_S = 15.0   # issue 16: the 8-parameter converged posterior, whole call
+
+
+def _identify_side(rec: Recording, names: tuple[str, ...], truth: dict[str, float],
+                   moves: str, steps: int | None) -> tuple[SamplerSide, dict]:
+    """identify with the given sampler moves, timed in CPU and wall time."""
+    c0, w0 = time.process_time(), time.perf_counter()
+    s = identify(rec, names, options=IdentifyOptions(steps=steps, moves=moves)).summary
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    pars = tuple(ParamRecovery(name=n, true=truth[n], mean=v["mean"], sd=v["sd"],
+                               bias=v["mean"] - truth[n], r_hat=v["r_hat"],
+                               ess_bulk=v["ess_bulk"])
+                 for n, v in s["parameters"].items())
+    samp = s["sampler"]
+    side = SamplerSide(moves=moves, cpu_s=cpu, wall_s=wall, posterior_s=samp["wall_s"],
+                       steps=samp["steps"], likelihood_evals=samp["likelihood_evals"],
+                       n_tau=samp["n_tau"], max_r_hat=max(p.r_hat for p in pars),
+                       min_ess=min(p.ess_bulk for p in pars), converged=s["converged"],
+                       parameters=pars)
+    return side, s
+
+
 def bench_posterior(quick: bool = False) -> PosteriorBench:
     """``identify`` of 8 parameters from 1 s at 10 kHz of the full (320-state) truth.
 
     True theta TRUE_8, sensor noise 2e-7 m, r1 1e-7 m, r2 0.02 A, seed 2; the sampler runs
-    to 50 tau (its own stopping rule). The baseline is an estimate, not a run: the
-    posterior's likelihood evaluations times the naive per-evaluation cost
+    to 50 tau (its own stopping rule). Side by side in the same process: the same call with
+    the sampler before issue 16 (``IdentifyOptions(moves="de")``, differential evolution
+    alone), run first. The naive baseline is an estimate, not a run: the posterior's
+    likelihood evaluations times the naive per-evaluation cost
     (:func:`~bayes_amb.bench.baselines.naive_eval_us`, measured on this record).
 
     Parameters
@@ -204,26 +229,25 @@ def bench_posterior(quick: bool = False) -> PosteriorBench:
     truth = {n: TRUE_8[n] for n in names}
     rec = make_recording("full", truth, 1e-4, 0.2 if quick else 1.0, seed=2,
                          noise_rms=2e-7, r1_rms=1e-7, r2_rms=0.02)
-    s = identify(rec, names, options=IdentifyOptions(steps=100 if quick else None)).summary
-    pars = tuple(ParamRecovery(name=n, true=truth[n], mean=v["mean"], sd=v["sd"],
-                               bias=v["mean"] - truth[n], r_hat=v["r_hat"],
-                               ess_bulk=v["ess_bulk"])
-                 for n, v in s["parameters"].items())
+    steps = 100 if quick else None
+    de, _ = _identify_side(rec, names, truth, "de", steps)
+    ours, s = _identify_side(rec, names, truth, "laplace", steps)
+    pars = ours.parameters
     fm, eps, _ = _posterior(rec, names)
     theta = np.array([truth[n] for n in names])
     eval_us = naive_eval_us(fm, eps, _ball(theta, 8, np.random.default_rng(1)),
                             2 if quick else 7)
     samp = s["sampler"]
     est = samp["likelihood_evals"] * eval_us * 1e-6
-    min_ess = min(p.ess_bulk for p in pars)
     return PosteriorBench(
         n_params=len(names), n_samples=rec.n_samples, posterior_s=samp["wall_s"],
-        wall_s=s["wall_s"], ess_per_s=min_ess / samp["wall_s"], converged=s["converged"],
-        max_r_hat=max(p.r_hat for p in pars), min_ess=min_ess, n_tau=samp["n_tau"],
+        wall_s=s["wall_s"], ess_per_s=ours.min_ess / samp["wall_s"], converged=s["converged"],
+        max_r_hat=ours.max_r_hat, min_ess=ours.min_ess, n_tau=samp["n_tau"],
         steps=samp["steps"], walkers=samp["walkers"], fixed_steps=quick,
         likelihood_evals=samp["likelihood_evals"], baseline_eval_us=eval_us,
         baseline_posterior_s_estimated=est, speedup_estimated=est / s["wall_s"],
-        parameters=pars)
+        parameters=pars, cpu_s=ours.cpu_s, de=de, cpu_speedup=de.cpu_s / ours.cpu_s,
+        wall_speedup=de.wall_s / ours.wall_s, target_s=POSTERIOR_TARGET_S)
 
 
 def bench_simulate(quick: bool = False) -> SimulateBench:

@@ -77,6 +77,37 @@ class ParamRecovery(Result):
 
 
 @dataclass(frozen=True)
+class SamplerSide(Result):
+    """One ``identify`` run of the posterior benchmark with the given sampler moves.
+
+    Attributes
+    ----------
+    moves : str
+        IdentifyOptions.moves ("laplace": the default; "de": differential evolution
+        alone, the sampler before issue 16).
+    cpu_s, wall_s, posterior_s : float
+        CPU time (time.process_time) and wall time of the whole call, and the sampler's
+        wall time, in s.
+    steps, likelihood_evals : int
+    n_tau, max_r_hat, min_ess : float
+    converged : bool
+    parameters : tuple of ParamRecovery
+    """
+
+    moves: str
+    cpu_s: float
+    wall_s: float
+    posterior_s: float
+    steps: int
+    likelihood_evals: int
+    n_tau: float
+    max_r_hat: float
+    min_ess: float
+    converged: bool
+    parameters: tuple[ParamRecovery, ...]
+
+
+@dataclass(frozen=True)
 class PosteriorBench(Result):
     """A full ``identify`` run and the estimated cost of the same run done naively.
 
@@ -99,6 +130,15 @@ class PosteriorBench(Result):
     speedup_estimated : float
         baseline_posterior_s_estimated / wall_s.
     parameters : tuple of ParamRecovery
+    cpu_s : float
+        CPU time (time.process_time) of the identify call, in s.
+    de : SamplerSide
+        The same identification with the sampler before issue 16 (IdentifyOptions(moves=
+        "de")), run in the same process right before ours.
+    cpu_speedup, wall_speedup : float
+        de.cpu_s / cpu_s and de.wall_s / wall_s.
+    target_s : float
+        Issue 16's target for wall_s.
     """
 
     n_params: int
@@ -118,6 +158,11 @@ class PosteriorBench(Result):
     baseline_posterior_s_estimated: float
     speedup_estimated: float
     parameters: tuple[ParamRecovery, ...]
+    cpu_s: float
+    de: SamplerSide
+    cpu_speedup: float
+    wall_speedup: float
+    target_s: float
 
 
 @dataclass(frozen=True)

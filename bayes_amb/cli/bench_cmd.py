@@ -107,13 +107,22 @@ def _details(d: dict[str, Any]) -> list[str]:
                    f"{_num(r['max_r_hat'], '.3f')}, min ESS {_num(r['min_ess'], '.0f')}, "
                    f"{_num(r['ess_per_s'], '.1f')} ESS/s; {r['likelihood_evals']} evaluations"
                    f" x {_us(r['baseline_eval_us'])} naive = the estimated baseline")
+        de = r["de"]
+        out.append(f"  side by side (issue 16, target {r['target_s']:g} s): Laplace mixture "
+                   f"{r['cpu_s']:.1f} s CPU / {r['wall_s']:.1f} s wall, {r['steps']} steps; "
+                   f"differential evolution alone (moves=\"de\", before) {de['cpu_s']:.1f} s "
+                   f"CPU / {de['wall_s']:.1f} s wall, {de['steps']} steps, "
+                   f"{de['likelihood_evals']} evaluations, "
+                   f"{'converged' if de['converged'] else 'NOT converged'}, max R-hat "
+                   f"{_num(de['max_r_hat'], '.3f')}, min ESS {_num(de['min_ess'], '.0f')}: "
+                   f"{r['cpu_speedup']:.1f}x less CPU, {r['wall_speedup']:.1f}x less wall")
         out.append(f"  {'param':<6} {'true':>7} {'mean':>8} {'sd':>7} {'bias/sd':>8} "
-                   f"{'R-hat':>6} {'ESS':>6}")
-        for p in r["parameters"]:
+                   f"{'R-hat':>6} {'ESS':>6}   {'mean':>8} {'sd':>7} (before)")
+        for p, q in zip(r["parameters"], de["parameters"], strict=True):
             z = p["bias"] / p["sd"] if p["sd"] else None
             out.append(f"  {p['name']:<6} {p['true']:>7.3f} {p['mean']:>8.4f} {p['sd']:>7.4f} "
                        f"{_num(z, '>+8.2f')} {_num(p['r_hat'], '>6.3f')} "
-                       f"{_num(p['ess_bulk'], '>6.0f')}")
+                       f"{_num(p['ess_bulk'], '>6.0f')}   {q['mean']:>8.4f} {q['sd']:>7.4f}")
     if "simulate" in d:
         r = d["simulate"]
         ok = "met" if r["simulate_s"] < r["requirement_s"] else "NOT met"

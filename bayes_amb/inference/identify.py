@@ -49,7 +49,9 @@ class IdentifyOptions:
     """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only, map_method
     (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max),
     noise_model ("loop": the coloured loop noise model; "iid": white Gaussian eps, the naive
-    model, kept to show that it is overconfident)."""
+    model, kept to show that it is overconfident), moves ("laplace": differential evolution
+mixed with independence proposals from the Laplace approximation at the MAP, the default;
+"de": differential evolution alone, the sampler before issue 16, kept for comparison)."""
 
     walkers: int | None = None
     steps: int | None = None
@@ -59,6 +61,7 @@ class IdentifyOptions:
     max_steps: int = 20000
     progress: Callable[[int, int, float], None] | None = None
     noise_model: str = "loop"
+    moves: str = "laplace"
 
 
 @dataclass
@@ -173,13 +176,24 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     if n_walkers < 2 * ndim:
         raise BayesAmbError(f"option --walkers: value {n_walkers} out of range: must be >= "
                             f"{2 * ndim} (2 x {ndim} sampled dimensions)")
+    if opt.moves not in ("laplace", "de"):
+        raise BayesAmbError(f"option moves: unknown value {opt.moves!r}; known: laplace, de")
     start = initial_ball(post, x_map, cov, n_walkers, rng)
-    run = run_emcee(post, start, rng, n_steps=opt.steps, max_steps=opt.max_steps,
-                    progress=opt.progress)
+    laplace = None
+    if opt.moves == "laplace" and cov is not None:
+        laplace = (x_map[:post.p], np.asarray(cov)[:post.p, :post.p])
+        like.remember_rows(4 * n_walkers)     # the noise-only moves reuse the band sums
+    try:
+        run = run_emcee(post, start, rng, n_steps=opt.steps, max_steps=opt.max_steps,
+                        laplace=laplace, progress=opt.progress)
+    finally:
+        like.remember_rows(0)
     loglik = pointwise_log_likelihood(like, run.samples, post.p)
     attrs = {"package_version": __version__, "recording": recording.source,
              "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin, "seed": opt.seed,
-             "inference": "emcee ensemble (differential-evolution moves), walkers as chains"}
+             "inference": ("emcee ensemble (differential-evolution moves"
+                           + (" and Laplace independence proposals" if laplace else "")
+                           + "), walkers as chains")}
     dt = to_datatree(names, run.samples, run.log_post, loglik, like, eps, forward.x, run.tau,
                      attrs)
     params_summary = summarise(dt, names, run.tau, recording.rig)
@@ -192,7 +206,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     summary["noise"]["posterior"] = noise_post
     summary["inference"] = "emcee posterior"
     summary["parameters"] = params_summary
-    summary["sampler"] = {"walkers": n_walkers, "steps": run.n_steps, "burn": run.burn,
+    summary["sampler"] = {"walkers": n_walkers, "moves": "laplace" if laplace else "de",
+                          "steps": run.n_steps, "burn": run.burn,
                           "thin": run.thin, "n_tau": run.n_tau,
                           "acceptance_mean": float(np.mean(run.acceptance)),
                           "wall_s": run.wall_s, "likelihood_evals": post.n_evals}

@@ -41,6 +41,8 @@ diagnostics of the discrepancy analysis look at the whole band.
 
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter, welch
@@ -238,6 +240,8 @@ class WhittleLikelihood:
         self.phi_sources = np.stack(phi)                            # (3, nbands, 4, 4)
         self.theta_ref = np.array(theta_ref, dtype=float)
         self._last_sums = None
+        if getattr(self, "_row_sums", None) is not None:
+            self._row_sums.clear()
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of eps - S(theta) x (scaled, minus any line terms) for a batch, and the
@@ -299,6 +303,9 @@ class WhittleLikelihood:
         last = getattr(self, "_last_sums", None)
         if last is not None and last[0] == key:
             return last[1], last[2]
+        memo = getattr(self, "_row_sums", None)
+        if memo is not None:
+            return self._band_sums_by_row(theta, memo)
         uniq, inverse = np.unique(theta, axis=0, return_inverse=True)
         if uniq.shape[0] < theta.shape[0]:
             Pb, stable = self._compute_band_sums(uniq)
@@ -308,6 +315,35 @@ class WhittleLikelihood:
             Pb, stable = self._compute_band_sums(theta)
         self._last_sums = (key, Pb, stable)
         return Pb, stable
+
+    def remember_rows(self, n_rows: int) -> None:
+        """Remember the band sums of the last n_rows distinct theta rows (0: off, the
+        default). A sampler's moves of the noise intensities alone (theta kept) then cost
+        the 4 x 4 algebra of the bands only. Forgotten by set_noise_reference; n_rows x
+        n_bands x 16 complex values of memory (64 kB a row at 256 bands)."""
+        self._row_sums: OrderedDict[bytes, tuple[NDArray, bool]] | None = (
+            OrderedDict() if n_rows > 0 else None)
+        self._row_capacity = int(n_rows)
+
+    def _band_sums_by_row(self, theta: NDArray, memo: OrderedDict[bytes, tuple[NDArray, bool]]
+                          ) -> tuple[NDArray, NDArray]:
+        """band_sums through the row memory: the rows not remembered are computed in one
+        batch (each row's P_b depends on that row only), the least recently used dropped."""
+        prefix = bytes([kernels.use_compiled()]) + id(self.forward).to_bytes(8, "little")
+        keys = [prefix + row.tobytes() for row in theta]
+        missing = list(dict.fromkeys(k for k in keys if k not in memo))
+        if missing:
+            idx = [keys.index(k) for k in missing]
+            Pb, stable = self._compute_band_sums(theta[idx])
+            for j, k in enumerate(missing):
+                memo[k] = (Pb[j], bool(stable[j]))
+        out = []
+        for k in keys:
+            memo.move_to_end(k)
+            out.append(memo[k])
+        while len(memo) > self._row_capacity:
+            memo.popitem(last=False)
+        return np.stack([o[0] for o in out]), np.array([o[1] for o in out])
 
     def _compute_band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         if not kernels.use_compiled():
