@@ -32,7 +32,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="effects to try, comma-separated (default " + ",".join(VOCABULARY)
                    + ", i.e. all)")
     p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
-                   help="log Bayes factor above which an effect is accepted, >= 0 (default 3)")
+                   help="log posterior odds (log Bayes factor - log of the number of "
+                   "candidates tried) above which an effect is accepted, >= 0 (default 3)")
     p.add_argument("--max-effects", type=integer(0), default=3, metavar="N",
                    help="most effects to accept, >= 0 (default 3)")
     p.add_argument("--sample", action="store_true",

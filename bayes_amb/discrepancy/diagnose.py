@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +41,13 @@ from bayes_amb.discrepancy.fitstats import (
     residual_spectrum,
     theta_summary,
 )
-from bayes_amb.discrepancy.locate import LocateOptions, Location, locate, merge_spans
+from bayes_amb.discrepancy.locate import (
+    LocateOptions,
+    Location,
+    locate,
+    merge_spans,
+    synchronous_speed,
+)
 from bayes_amb.discrepancy.select import (
     FittedModel,
     Selection,
@@ -204,6 +210,23 @@ def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
     return "mismatch, unexplained" if loc.detected else "no mismatch"
 
 
+def _running_speed(nominal: FittedModel, loc: Location, residual: np.ndarray
+                   ) -> dict[str, Any] | None:
+    """When the nominal residual holds a line at 1x, the running speed is estimated from it
+    and the line candidates use that (the extended models share the nominal's context).
+    Returns the check line, or None without a 1x line."""
+    if not any(ln["synchronous"] for ln in loc.lines):
+        return None
+    fwd = nominal.forward
+    written = fwd.recording.speed_rpm
+    est = synchronous_speed(residual, fwd.dt, written)
+    fwd.ctx = replace(fwd.ctx, speed_rpm=est)
+    rel = est / written - 1.0
+    return {"check": "speed", "ok": True, "speed_rpm": est, "written_rpm": written,
+            "line": f"speed: the 1x line is at {est:.1f} rpm ({100 * rel:+.2f} % from the "
+                    f"{written:g} rpm written in the record); synchronous candidates use it"}
+
+
 @limited_threads
 def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | None = None,
              priors: dict[str, Prior] | None = None,
@@ -230,6 +253,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     say("locating the mismatch")
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=opt.seed))
+    before = fit_quality(nominal, eps)
+    speed = _running_speed(nominal, loc, before["residual"])
     pool = (*left_out_coefficients(names), *opt.candidates)
     sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
                             max_effects=0 if checks.failed else opt.max_effects,
@@ -248,7 +273,6 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         for i, fm in enumerate({id(m): m for m in (nominal, sel.final)}.values()):
             say(f"sampling the posterior of model {i + 1}")
             _sample(fm, opt.steps, opt.seed + i)
-    before = fit_quality(nominal, eps)
     after = fit_quality(sel.final, eps)
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(sel.final, seed=opt.seed)
     effects = effect_summaries(sel.final, s_fin)
@@ -256,13 +280,14 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     explanations = []
     for fm, eff in zip(sel.accepted, effects, strict=True):
         cand = fm.candidates[-1]
+        odds = fm.log_odds if fm.log_odds is not None else np.nan
         explanations.append({**eff, "title": cand.entry.title, "side": cand.entry.side,
-                             "score": fm.log_bf,
+                             "score": fm.log_bf, "log_posterior_odds": fm.log_odds,
                              "kind": "model" if cand.nominal_family else "physics",
                              "equivalence_class": [cand.key, *cand.equivalents()],
                              "confidence": confidence,
                              "evidence": f"log Bayes factor {fm.log_bf:.1f} against the model "
-                                         "without it"})
+                                         f"without it (log posterior odds {odds:.1f})"})
     mismatch = loc.to_dict()
     mismatch["improvement"] = improvement_location(nominal, sel.final, before["residual"],
                                                    after["residual"])
@@ -279,7 +304,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "package_version": __version__,
         "recording": source.name,
         "parameters_estimated": list(names),
-        "checks": checks.to_list(),
+        "checks": checks.to_list() + ([speed] if speed else []),
         "record_window": {"start_s": checks.start * recording.dt,
                           "at_rest": checks.at_rest,
                           "meaning": "samples before start_s drive the model but are not "
@@ -296,7 +321,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "parameters_before": theta_summary(nominal, s_nom),
         "parameters_after": theta_summary(sel.final, s_fin),
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "
-                      f"likelihood; accept above log BF {opt.log_bf_threshold:g}"),
+                      "likelihood; prior odds 1/K for each of the K candidates of a round; "
+                      f"accept above log posterior odds {opt.log_bf_threshold:g}"),
         "inference": "emcee" if opt.sample else "MAP with Laplace approximation",
         "seed": opt.seed,
     }
