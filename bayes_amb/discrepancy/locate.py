@@ -175,8 +175,12 @@ def whitened_series(W: NDArray, k: NDArray, n: int) -> NDArray:
     """Real time series (n, 4) whose rfft is W on bins k (zero elsewhere), unit variance."""
     full = np.zeros((n // 2 + 1, W.shape[1]), dtype=complex)
     full[k] = W
-    e = np.fft.irfft(full, n, axis=0)
-    return e / np.sqrt(np.mean(e**2, axis=0, keepdims=True))
+    return _unit_variance(np.fft.irfft(full, n, axis=0))
+
+
+def _unit_variance(e: NDArray) -> NDArray:
+    """Each column of a series scaled to unit mean square."""
+    return e / np.sqrt(np.maximum(np.mean(e**2, axis=0, keepdims=True), 1e-300))
 
 
 def ljung_box(e: NDArray, lags: int) -> tuple[NDArray, NDArray]:
@@ -204,8 +208,7 @@ def flat_series(x: NDArray) -> NDArray:
     n = x.shape[0]
     X = np.fft.rfft(x - x.mean(axis=0), axis=0)
     X[0] = 0.0
-    f = np.fft.irfft(flatten(X), n, axis=0)
-    return f / np.sqrt(np.maximum(np.mean(f**2, axis=0, keepdims=True), 1e-300))
+    return _unit_variance(np.fft.irfft(flatten(X), n, axis=0))
 
 
 def _xcorr(e: NDArray, x: NDArray, lags: int) -> tuple[NDArray, NDArray]:
@@ -339,6 +342,10 @@ def _ppc(like: RobustWhittle, P_hat: NDArray, cov: NDArray | None, L: NDArray,
             "power": float(np.mean(t_pow >= obs[1])) if t_pow.size else 1.0}
 
 
+MISMATCH_TESTS = ("coherence", "crosscorr", "lines", "windows")
+"""The tests whose findings count as a mismatch (structure physics can leave)."""
+
+
 def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
            cov: NDArray | None = None, options: LocateOptions | None = None) -> Location:
     """Run the location tests on the residual of a fitted (nominal) model.
@@ -417,10 +424,6 @@ def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
                     floor_p=floor_p, whiteness_p=lb_p, xcorr=xc,
                     xcorr_bound=float(2.576 / np.sqrt(like.n)), autocorr=ac, lines=lines,
                     noise_findings=noise_findings)
-
-
-MISMATCH_TESTS = ("coherence", "crosscorr", "lines", "windows")
-"""The tests whose findings count as a mismatch (structure physics can leave)."""
 
 
 def _holm_families(families: dict[str, NDArray]) -> dict[str, NDArray]:

@@ -15,7 +15,10 @@ from bayes_amb.discrepancy.library.base import (
     Sampled,
     append_states,
     channels_of,
+    corner_hz,
+    live_inverse,
     positive_rows,
+    time_constant_s,
     where_text,
 )
 from bayes_amb.inference.priors import Prior
@@ -28,8 +31,7 @@ def input_second_order(A: NDArray, B: NDArray, C: NDArray, tau: NDArray, zeta: N
     with tau = 0 get inert states (no filter)."""
     q = len(chans)
     A, B, C, n = append_states(A, B, C, 2 * q)
-    live = tau > 0
-    inv = np.where(live, 1.0 / np.where(live, tau, 1.0), 1.0)
+    live, inv = live_inverse(tau)
     for j, ch in enumerate(chans):
         i, v = n + 2 * j, n + 2 * j + 1
         A[:, i, i] = A[:, v, v] = -1.0                       # inert rows
@@ -54,13 +56,12 @@ class Actuator2nd(Candidate):
         return positive_rows(phi)
 
     def continuous(self, A, B, C, phi, ctx):
-        tau = np.clip(np.nan_to_num(phi[:, 0]), 0.0, None) * 1e-3
+        tau = time_constant_s(phi)
         zeta = np.clip(np.nan_to_num(phi[:, 1], nan=0.7), 1e-3, None)
         return input_second_order(A, B, C, tau, zeta, channels_of(self.location))
 
     def physical(self, draws, ctx):
-        tau = np.maximum(draws[:, 0], 1e-12) * 1e-3
-        return {"natural_hz": (1.0 / (2 * np.pi * tau), "Hz"), "zeta": (draws[:, 1], "-")}
+        return {"natural_hz": (corner_hz(draws), "Hz"), "zeta": (draws[:, 1], "-")}
 
     def describe(self, values):
         return (f"second-order actuator dynamics {values['natural_hz']:.0f} Hz, damping ratio "

@@ -15,7 +15,10 @@ from bayes_amb.discrepancy.library.base import (
     Sampled,
     append_states,
     channels_of,
+    corner_hz,
+    live_inverse,
     positive_rows,
+    time_constant_s,
     where_text,
 )
 from bayes_amb.inference.priors import Prior
@@ -28,8 +31,7 @@ def input_lag(A: NDArray, B: NDArray, C: NDArray, tau: NDArray, chans: list[int]
     so that a batch may mix them; their map is the plant without lag."""
     q = len(chans)
     A, B, C, n = append_states(A, B, C, q)
-    live = tau > 0
-    inv = np.where(live, 1.0 / np.where(live, tau, 1.0), 1.0)
+    live, inv = live_inverse(tau)
     idx = n + np.arange(q)
     A[:, idx, idx] = -inv[:, None]
     for j, ch in enumerate(chans):
@@ -51,12 +53,11 @@ class ActuatorLag(Candidate):
         return positive_rows(phi)
 
     def continuous(self, A, B, C, phi, ctx):
-        tau = np.clip(np.nan_to_num(phi[:, 0]), 0.0, None) * 1e-3
+        tau = time_constant_s(phi)
         return input_lag(A, B, C, tau, channels_of(self.location))
 
     def physical(self, draws, ctx):
-        tau = np.maximum(draws[:, 0], 1e-12) * 1e-3
-        return {"bandwidth_hz": (1.0 / (2 * np.pi * tau), "Hz")}
+        return {"bandwidth_hz": (corner_hz(draws), "Hz")}
 
     def describe(self, values):
         return (f"actuator bandwidth {values['bandwidth_hz']:.0f} Hz at "

@@ -254,6 +254,23 @@ def positive_rows(phi: NDArray) -> NDArray:
     return (np.nan_to_num(phi[:, 0], nan=0.0) > 0).astype(int)
 
 
+def time_constant_s(phi: NDArray) -> NDArray:
+    """The hook's time constant (s) from a sampled column in ms: NaN and negatives -> 0."""
+    return np.clip(np.nan_to_num(phi[:, 0]), 0.0, None) * 1e-3
+
+
+def corner_hz(draws: NDArray) -> NDArray:
+    """The frequency (Hz) 1 / (2 pi tau) of sampled time constants tau in ms (column 0)."""
+    return 1.0 / (2 * np.pi * np.maximum(draws[:, 0], 1e-12) * 1e-3)
+
+
+def live_inverse(tau: NDArray) -> tuple[NDArray, NDArray]:
+    """Rows with a filter (tau > 0) and 1 / tau on them (1 on the others, whose added
+    states are inert)."""
+    live = tau > 0
+    return live, np.where(live, 1.0 / np.where(live, tau, 1.0), 1.0)
+
+
 def append_states(A: NDArray, B: NDArray, C: NDArray, k: int
                   ) -> tuple[NDArray, NDArray, NDArray, int]:
     """(A, B, C) stacks with k zero states appended; returns them and the first new index."""
