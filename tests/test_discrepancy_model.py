@@ -58,7 +58,7 @@ def test_family_covers_the_vocabulary_and_shares_one_interface():
     cands = all_candidates(representatives=False)
     assert {c.effect for c in cands} == set(VOCABULARY)
     assert len({c.key for c in cands}) == len(cands)
-    hooks = ("params", "lft_names", "n_bending", "modal", "continuous", "discretise",
+    hooks = ("params", "lft_names", "bending_pairs", "modal", "continuous", "discretise",
              "structure", "discrete", "line_force", "line_output", "physical", "describe")
     for c in cands:
         assert isinstance(c, Candidate) and c.fingerprint
@@ -91,7 +91,7 @@ CASES = [
     ("time_delay:delay_s=2.37e-4", TimeDelay("time_delay", "controller"), lambda ctx: [0.237]),
     ("cross_coupling:kxy=3e5,location=D2", CrossCoupling("cross_coupling", "D2"),
      lambda ctx: [3.0]),
-    ("flexible_mode:n_modes=1", FlexibleMode("flexible_mode", "bending pair 1", 1),
+    ("flexible_mode:n_modes=1", FlexibleMode("flexible_mode", "bending pair 1", pair=1),
      lambda ctx: [0.0, 0.0]),
     ("sensor_gain:gain=0.04,channel=Bx", SensorGain("sensor_gain", "Bx"), lambda ctx: [0.04]),
     ("unbalance:u_kgm=5e-6,disc=D2,phase_deg=30", Unbalance("unbalance", "D2"),

@@ -55,3 +55,26 @@ def test_a_tentative_wrong_name_is_wrong_but_not_confident():
     r = fb.score(t, _report(("sensor_gain", "Ax", {}, "tentative", []), unexplained=True))
     assert r["wrong"] == ["sensor_gain@Ax"] and not r["wrong_confident"]
     assert not r["in_library"] and r["unexplained"]
+
+
+def test_the_full_truths_flexibility_is_right_and_anything_else_spurious():
+    """Full 320-state truth: the bending pairs and the residual flexibility are its own
+    physics (not wrong); pair 1 is required; a gain beside them is spurious."""
+    t = {**_truth(), "truth": "full"}
+    flex = [("flexible_mode", f"bending pair {k}", {}, "confident", []) for k in (2, 1)]
+    res = ("residual_flexibility", "truncated modes", {}, "confident", [])
+    r = fb.score(t, _report(*flex, res))
+    assert r["all_named"] and not r["wrong"]
+    r = fb.score(t, _report(*flex, ("actuator_gain", "Ax", {}, "tentative", [])))
+    assert r["all_named"] and r["wrong"] == ["actuator_gain@Ax"]
+    r = fb.score(t, _report(flex[0]))
+    assert not r["all_named"]                      # pair 1 is not named
+
+
+def test_a_pair_the_reduced_truth_does_not_have_is_wrong():
+    t = {**_truth(), "n_bending": 1}
+    r = fb.score(t, _report(("flexible_mode", "bending pair 1", {}, "confident", []),
+                            ("flexible_mode", "bending pair 2", {}, "confident", []),
+                            ("residual_flexibility", "truncated modes", {}, "confident", [])))
+    assert r["all_named"]
+    assert r["wrong"] == ["flexible_mode@bending pair 2", "residual_flexibility@truncated modes"]

@@ -41,7 +41,8 @@ REP = {   # a representative value of each candidate's sampled parameters
     "sensor_lag@A": [0.1], "sensor_lag@both": [0.1],
     "actuator_gain@Ax": [0.05], "sensor_gain@Ax": [0.05], "sensor_gain@Bx": [0.05],
     "cross_coupling@D1": [0.4], "cross_coupling@A": [0.4],
-    "flexible_mode@bending pair 1": [0.0, 0.0],
+    "flexible_mode@bending pair 1": [0.0, 0.0], "flexible_mode@bending pair 2": [0.0, 0.0],
+    "flexible_mode@bending pair 3": [0.0, 0.0], "residual_flexibility@truncated modes": [1.0],
 }
 LINES = ("unbalance@D1", "unbalance@n20", "unbalance@D2", "runout@Ax", "runout@Ay",
          "runout@Bx")

@@ -35,8 +35,9 @@ FOREIGN_ALIASES = {"actuator_delay": "time_delay"}
 
 @pytest.fixture(scope="module")
 def ctx():
-    return ModelContext(rig=load_rig(), dt=1e-4, speed_rpm=31500.0, bending_hz=(1027.0,),
-                        bending_zeta=(0.01,))
+    return ModelContext(rig=load_rig(), dt=1e-4, speed_rpm=31500.0,
+                        bending_hz=(1027.0, 1286.0, 2542.0, 3095.0, 4466.0, 5051.0),
+                        bending_zeta=(0.003,) * 6, static_residual=np.eye(4) * 1e-8)
 
 
 @pytest.mark.parametrize("name", list(REGISTRY) + list(NOMINAL_FAMILY))
@@ -48,7 +49,7 @@ def test_entry_matches_its_candidates(ctx, name):
         c = e.make(loc)
         assert (c.effect, c.location, c.entry) == (name, loc, e)
         ps = c.params(ctx)
-        assert [p.name for p in ps] == [s.name.format(location=loc) for s in e.sampled]
+        assert [p.name for p in ps] == [s.at(loc).name for s in e.sampled]
         assert [p.null for p in ps] == [s.null for s in e.sampled]
         draws = np.array([[p.null + 0.01 if p.null == 0 else p.null for p in ps]])
         phys = c.physical(draws, ctx)

@@ -133,3 +133,19 @@ def test_fidelity_gap_is_large_past_the_first_bending_mode(models):
     past the second bending pair) the gap exceeds 10 dB, so max_gap_db can detect a misfit."""
     sv = singular_value_data(reduce_pseudo_modal(models[31500.0]))
     assert sv.max_gap_db(upto_rad_s=sv.omega[-1]) > 10.0
+
+
+def test_keeping_chosen_bending_pairs_keeps_exactly_their_poles():
+    """keep_bending_pairs(red, (2,)): the rigid-body poles and pair 2's, none of pair 1's;
+    the kept system's poles are its A's eigenvalues (A block diagonal in the modal basis)."""
+    from bayes_amb.reduction.pseudo_modal import keep_bending_pairs
+    red = reduce_pseudo_modal(load_rig(), n_bending=2)
+    sub = keep_bending_pairs(red, (2,))
+    assert sub.n_states == 12
+    want = np.concatenate([red.poles[:8], red.poles[12:16]])
+    np.testing.assert_allclose(np.sort_complex(np.linalg.eigvals(sub.A)),
+                               np.sort_complex(want), rtol=1e-8)
+    assert np.min(np.abs(np.linalg.eigvals(sub.A)[:, None] - red.poles[8:12][None])) > 100
+    np.testing.assert_allclose(sub.T_L @ sub.T_R, np.eye(12), atol=1e-9)
+    with pytest.raises(ReductionError):
+        keep_bending_pairs(red, (3,))

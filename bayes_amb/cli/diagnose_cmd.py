@@ -34,8 +34,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
                    help="log posterior odds (log Bayes factor - log of the number of "
                    "candidates tried) above which an effect is accepted, >= 0 (default 3)")
-    p.add_argument("--max-effects", type=integer(0), default=3, metavar="N",
-                   help="most effects to accept, >= 0 (default 3)")
+    p.add_argument("--max-effects", type=integer(0), default=4, metavar="N",
+                   help="most effects to accept, >= 0 (default 4)")
     p.add_argument("--sample", action="store_true",
                    help="emcee posteriors of the nominal and final models (default: Laplace)")
     p.add_argument("--steps", type=integer(10), default=2000, metavar="N",

@@ -77,7 +77,7 @@ class DiagnoseOptions:
     are Laplace approximations), steps per sampled model, seed, progress callback(text)."""
 
     log_bf_threshold: float = 3.0
-    max_effects: int = 3
+    max_effects: int = 4
     candidates: tuple[Candidate, ...] = field(default_factory=all_candidates)
     sample: bool = False
     steps: int = 2000

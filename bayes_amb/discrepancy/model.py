@@ -18,6 +18,8 @@ With no candidates this is the nominal model evaluated through the general loop 
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 from numpy.typing import NDArray
 
@@ -28,7 +30,7 @@ from bayes_amb.inference.loop_model import loop_matrices
 from bayes_amb.inference.priors import Prior, PriorSet, default_prior
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
-from bayes_amb.reduction.pseudo_modal import N_RIGID, ReducedModel
+from bayes_amb.reduction.pseudo_modal import N_RIGID, ReducedModel, keep_bending_pairs
 from bayes_amb.uncertainty import lft_reduced, parse_param_list
 
 
@@ -36,7 +38,7 @@ def model_context(forward: ForwardModel) -> ModelContext:
     """Rig, dt, speed and the FE bending modes (Hz, damping ratio) of a forward model."""
     poles = forward.reduced.full.poles
     bend = poles[forward.reduced.n_states:]
-    bend = bend[bend.imag > 0][:4]
+    bend = bend[bend.imag > 0][:16]
     return ModelContext(rig=forward.recording.rig, dt=forward.dt,
                         speed_rpm=forward.recording.speed_rpm,
                         bending_hz=tuple(float(v) for v in np.abs(bend) / (2 * np.pi)),
@@ -51,7 +53,8 @@ class ExtendedForwardModel(ForwardModel):
     modes).
     """
 
-    _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases")
+    _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases",
+               "_static_fe")
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
                  candidates: tuple[Candidate, ...] = (),
@@ -65,7 +68,9 @@ class ExtendedForwardModel(ForwardModel):
         else:
             super().__init__(recording, params)
             self.ctx = model_context(self)
-            self._bases: dict[int, ReducedModel] = {0: self.reduced}
+            self._bases: dict[tuple[int, ...], ReducedModel] = {(): self.reduced}
+            fe = self.reduced.full
+            self._static_fe = -fe.C @ np.linalg.solve(fe.A, fe.B)
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
@@ -76,10 +81,17 @@ class ExtendedForwardModel(ForwardModel):
         self.fast = False
         self.candidates = tuple(candidates)
         self.theta_names = self.params
-        n_bend = max((c.n_bending() for c in self.candidates), default=0)
-        if n_bend not in self._bases:
-            self._bases[n_bend] = reduce_pseudo_modal(self.reduced.full, n_bending=n_bend)
-        self.base = self._bases[n_bend]
+        pairs = tuple(sorted({k for c in self.candidates for k in c.bending_pairs()}))
+        if pairs not in self._bases:
+            self._bases[pairs] = keep_bending_pairs(
+                reduce_pseudo_modal(self.reduced.full, n_bending=max(pairs)), pairs)
+        self.base = self._bases[pairs]
+        # the first state of each candidate's bending pair (modal hook)
+        self._first = [N_RIGID + 4 * pairs.index(c.bending_pairs()[0]) if c.bending_pairs()
+                       else N_RIGID for c in self.candidates]
+        b = self.base
+        self.ctx = replace(self.ctx, kept_pairs=pairs,
+                           static_residual=self._static_fe + b.C @ np.linalg.solve(b.A, b.B))
         lft_names = list(self.theta_names)
         for c in self.candidates:
             lft_names += [n for n in c.lft_names() if n not in lft_names]
@@ -116,7 +128,7 @@ class ExtendedForwardModel(ForwardModel):
         pl = self.plant
         A = np.array(np.broadcast_to(pl.A, (nb, *pl.A.shape)))
         for i, c in enumerate(self.candidates):
-            A = c.modal(A, self.phi(P, i), self.ctx, N_RIGID)
+            A = c.modal(A, self.phi(P, i), self.ctx, self._first[i])
         diag = np.repeat(P[:, self._lft_index], pl.blocks, axis=1)
         A = A + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
         B = np.array(np.broadcast_to(pl.B, (nb, *pl.B.shape)))
@@ -147,7 +159,7 @@ class ExtendedForwardModel(ForwardModel):
             Ad, Bd = zoh_batched(A, B, self.dt)
             Cd = C
         for i, c in enumerate(self.candidates):
-            Ad, Bd, Cd = c.discrete(Ad, Bd, Cd, self.phi(P, i))
+            Ad, Bd, Cd = c.discrete(Ad, Bd, Cd, self.phi(P, i), self.ctx)
         return Ad, Bd, Cd
 
     def _loop(self, P: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:

@@ -72,7 +72,7 @@ class SelectOptions:
     below which a candidate is not refined."""
 
     log_bf_threshold: float = 3.0
-    max_effects: int = 3
+    max_effects: int = 4
     n_refine: int = 3
     screen_min: float = 2.0
     candidates: tuple[Candidate, ...] = field(default_factory=all_candidates)

@@ -165,3 +165,26 @@ def reduce_pseudo_modal(model: FullModel | Rig, n_bending: int = 0,
     C = fm.C @ T_R
     return ReducedModel(A=A, B=B, C=C, T_L=T_L, T_R=T_R, poles=kept, n_bending=n_bending,
                         speed_rpm=fm.speed_rpm, full=fm)
+
+
+def keep_bending_pairs(red: ReducedModel, pairs: tuple[int, ...]) -> ReducedModel:
+    """The reduction keeping the rigid-body modes and only the bending pairs ``pairs``
+    (1-based, each of them <= red.n_bending): its states are those of ``red`` for the kept
+    modes. A is block diagonal in the real modal basis, so deleting a pair's four states
+    (backward and forward whirl) is exactly the reduction that leaves that pair out.
+
+    >>> from bayes_amb.rig import load_rig
+    >>> keep_bending_pairs(reduce_pseudo_modal(load_rig(), n_bending=2), (2,)).n_states
+    12
+    """
+    pairs = tuple(sorted(set(pairs)))
+    if any(not 1 <= k <= red.n_bending for k in pairs):
+        raise ReductionError(f"bending pairs {pairs} not all in 1..{red.n_bending}")
+    if pairs == tuple(range(1, red.n_bending + 1)):
+        return red
+    idx = np.concatenate([np.arange(N_RIGID)]
+                         + [N_RIGID + 4 * (k - 1) + np.arange(4) for k in pairs]).astype(int)
+    return ReducedModel(A=red.A[np.ix_(idx, idx)], B=red.B[idx], C=red.C[:, idx],
+                        T_L=red.T_L[idx], T_R=red.T_R[:, idx], poles=red.poles[idx],
+                        n_bending=len(pairs), speed_rpm=red.speed_rpm, full=red.full)
+

@@ -36,6 +36,7 @@ from bayes_amb.discrepancy.library.registry import (
     make_candidate,
     markdown_table,
 )
+from bayes_amb.discrepancy.library.residual_flexibility import ResidualFlexibility
 from bayes_amb.discrepancy.library.runout import Runout
 from bayes_amb.discrepancy.library.sensor_delay import SensorDelay
 from bayes_amb.discrepancy.library.sensor_gain import SensorGain
@@ -46,7 +47,7 @@ from bayes_amb.discrepancy.library.unbalance import Unbalance
 __all__ = ["BEARING_COEFFICIENTS", "NOMINAL_FAMILY", "REGISTRY", "VOCABULARY", "Actuator2nd",
            "ActuatorGain", "ActuatorLag", "BearingCoefficient", "Candidate", "CrossCoupling",
            "EffectEntry", "EffectParam", "Equivalence", "FlexibleMode", "ModelContext",
-           "Quantity", "Runout", "Sampled", "SensorDelay", "SensorGain", "SensorLag",
+           "Quantity", "ResidualFlexibility", "Runout", "Sampled", "SensorDelay", "SensorGain", "SensorLag",
            "SynchronousLine", "TimeDelay", "Unbalance", "all_candidates", "entry",
            "equivalents_of", "left_out_coefficients", "library_table", "make_candidate",
            "markdown_table"]

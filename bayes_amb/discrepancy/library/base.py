@@ -4,14 +4,16 @@ Every candidate has the same hooks, all vectorised over a batch of parameter row
 (nb, q). The extended model (discrepancy/model.py) applies them in a fixed order:
 
 1. ``lft_names``    extra LFT parameters (cross-coupled stiffness, eqs. 48-52)
-2. ``n_bending``    bending-mode pairs the reduction must keep (flexible modes)
+2. ``bending_pairs`` bending-mode pairs the reduction must keep (flexible modes); the
+                    model keeps the union of them, and no others
 3. ``modal``        change of the nominal modal blocks before the LFT (bending frequency)
 4. ``continuous``   change of the continuous plant (A, B, C): actuator and sensor dynamics
                     as added states, actuator gain; every hook appends its states after the
                     ones it receives, so that they compose in any order
 5. ``discretise``   its own exact sampling of the plant (fractional delay; at most one such
                     candidate per model: delays on both sides add up to one delay)
-6. ``discrete``     change of the sampled plant (sensor gain)
+6. ``discrete``     change of the sampled plant (sensor gain; the static contribution of
+                    the modes the model leaves out, ``ctx.static_residual``)
 7. ``line_force`` / ``line_output``   a deterministic 1x line not driven by the excitation:
                     a force at the plant input (unbalance) or a signal added to the
                     measurement (runout)
@@ -25,7 +27,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import ClassVar
 
 import numpy as np
@@ -68,8 +70,10 @@ class Sampled:
     prior_text: str = ""
 
     def at(self, location: str, prior: Prior | None = None) -> EffectParam:
-        """The EffectParam at a location (optionally with a recording-dependent prior)."""
-        return EffectParam(self.name.format(location=location), prior or self.prior,
+        """The EffectParam at a location (optionally with a recording-dependent prior);
+        spaces in the location become underscores in the name."""
+        return EffectParam(self.name.format(location=location.replace(" ", "_")),
+                           prior or self.prior,
                            self.null, self.unit)
 
     def describe_prior(self) -> str:
@@ -123,15 +127,20 @@ class EffectEntry:
 
 @dataclass(frozen=True)
 class ModelContext:
-    """What candidates need to know about the recording: rig, sample time (s), speed (rpm),
-    and the nominal bending frequencies (Hz) and damping ratios of the FE model at that
-    speed, lowest first."""
+    """What candidates need to know about the recording and the model: rig, sample time
+    (s), speed (rpm), the nominal bending frequencies (Hz) and damping ratios of the FE model
+    at that speed, lowest first (backward and forward whirl of pair 1, then pair 2, ...);
+    per model: the bending pairs it keeps (1-based) and ``static_residual`` (4, 4), the
+    static contribution in m/A of every FE mode the model leaves out, from actuator current
+    to sensor displacement (G_FE(0) - G_model(0) with G(0) = -C A^-1 B, nominal bearings)."""
 
     rig: Rig
     dt: float
     speed_rpm: float
     bending_hz: tuple[float, ...]
     bending_zeta: tuple[float, ...]
+    kept_pairs: tuple[int, ...] = ()
+    static_residual: NDArray | None = field(default=None, compare=False, repr=False)
 
     @property
     def omega_rot(self) -> float:
@@ -178,11 +187,13 @@ class Candidate:
     def lft_names(self) -> tuple[str, ...]:
         return ()
 
-    def n_bending(self) -> int:
-        return 0
+    def bending_pairs(self) -> tuple[int, ...]:
+        """The FE bending-mode pairs (1-based) the model must keep for this candidate."""
+        return ()
 
-    def modal(self, A: NDArray, phi: NDArray, ctx: ModelContext, n_rigid: int) -> NDArray:
-        """Batched nominal reduced A (nb, n, n) in modal coordinates -> changed A."""
+    def modal(self, A: NDArray, phi: NDArray, ctx: ModelContext, first: int) -> NDArray:
+        """Batched nominal reduced A (nb, n, n) in modal coordinates -> changed A; ``first``
+        is the index of the first state of this candidate's bending pair (if it has one)."""
         return A
 
     def continuous(self, A: NDArray, B: NDArray, C: NDArray, phi: NDArray,
@@ -201,8 +212,9 @@ class Candidate:
         systems (e.g. no added states at the null)."""
         return np.zeros(phi.shape[0], dtype=int)
 
-    def discrete(self, Ad: NDArray, Bd: NDArray, Cd: NDArray, phi: NDArray
-                 ) -> tuple[NDArray, NDArray, NDArray]:
+    def discrete(self, Ad: NDArray, Bd: NDArray, Cd: NDArray, phi: NDArray,
+                 ctx: ModelContext) -> tuple[NDArray, NDArray, NDArray]:
+        """Batched sampled plant -> changed plant (may append states)."""
         return Ad, Bd, Cd
 
     def line_force(self, ctx: ModelContext) -> NDArray | None:

@@ -6,27 +6,38 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bayes_amb.discrepancy.library.base import Candidate, EffectEntry, Quantity, Sampled
+from bayes_amb.discrepancy.library.base import (
+    Candidate,
+    EffectEntry,
+    Quantity,
+    Sampled,
+)
 from bayes_amb.inference.priors import Prior
+
+N_PAIRS = 3
+"""Bending pairs the diagnosis tries (on the reference rig at 31 500 rpm: 1027/1286,
+2542/3095 and 4466/5051 Hz backward/forward whirl; the last is aliased at 10 kHz)."""
 
 
 @dataclass(frozen=True)
 class FlexibleMode(Candidate):
-    """The reduced model extended with the first ``n_pairs`` bending-mode pairs of the FE
-    model (the reduction keeping 8 + 4k states). Sampled: the log of a common frequency
-    scale of the added modes (prior sd 3 %) and the log of a damping multiplier (prior
-    lognormal, sd a factor e). The FE prediction is the null (0, 0)."""
+    """The reduced model extended with bending-mode pair ``pair`` of the FE model (its
+    backward and forward whirl modes, four states). Sampled: the log of a frequency scale of
+    the pair (prior sd 3 %) and the log of a damping multiplier (prior lognormal, sd a factor
+    e). The FE prediction is the null (0, 0). Repeatable: each pair is its own instance, and
+    the model keeps exactly the pairs its instances name (a pair not named is left out, not
+    carried at its FE values)."""
 
-    n_pairs: int = 1
+    pair: int = 1
 
-    def n_bending(self):
-        return self.n_pairs
+    def bending_pairs(self):
+        return (self.pair,)
 
-    def modal(self, A, phi, ctx, n_rigid):
+    def modal(self, A, phi, ctx, first):
         s = np.exp(np.clip(phi[:, 0], -0.5, 0.5))
         md = np.exp(np.clip(phi[:, 1], -6.0, 6.0))
         A = A.copy()
-        for i in range(n_rigid, n_rigid + 4 * self.n_pairs, 2):
+        for i in range(first, first + 4, 2):
             sig, om = A[:, i, i], A[:, i + 1, i]
             mod = np.hypot(sig, om)
             zeta = np.clip(-sig / mod * md, -0.99, 0.99)
@@ -39,26 +50,43 @@ class FlexibleMode(Candidate):
         return A
 
     def physical(self, draws, ctx):
-        return {"frequency_hz": (ctx.bending_hz[0] * np.exp(draws[:, 0]), "Hz"),
-                "damping_ratio": (ctx.bending_zeta[0] * np.exp(draws[:, 1]), "-")}
+        j = 2 * (self.pair - 1)
+        return {"frequency_hz": (ctx.bending_hz[j] * np.exp(draws[:, 0]), "Hz"),
+                "forward_hz": (ctx.bending_hz[j + 1] * np.exp(draws[:, 0]), "Hz"),
+                "damping_ratio": (ctx.bending_zeta[j] * np.exp(draws[:, 1]), "-")}
 
     def describe(self, values):
-        return (f"bending mode near {values['frequency_hz']:.0f} Hz (damping ratio "
+        return (f"bending pair {self.pair} near {values['frequency_hz']:.0f} Hz "
+                f"(forward whirl {values['forward_hz']:.0f} Hz, damping ratio "
                 f"{values['damping_ratio']:.2g}) missing from the model")
+
+
+def _location(pair: int) -> str:
+    return f"bending pair {pair}"
+
+
+def _make(location: str) -> FlexibleMode:
+    try:
+        pair = int(location.rsplit(" ", 1)[-1])
+    except ValueError:
+        raise ValueError(f"flexible_mode: location {location!r} is not 'bending pair <k>'")
+    return FlexibleMode("flexible_mode", location, pair)
 
 
 ENTRY = EffectEntry(
     name="flexible_mode", title="flexible (bending) modes",
-    description=("the first bending-mode pair of the FE rotor, which the 8-state rigid-body "
-                 "model leaves out, with its frequency and damping scaled"),
+    description=("a bending-mode pair (backward and forward whirl) of the FE rotor, which "
+                 "the 8-state rigid-body model leaves out, with its frequency and damping "
+                 "scaled; one instance per pair"),
     fingerprint=("a narrow band near a bending frequency of the FE model, on the channels "
                  "where the mode shape is seen"),
-    side="plant", locations=("bending pair 1",),
-    sampled=(Sampled("log_freq_scale", Prior("normal", 0.0, 0.03), 0.0, "-",
-                     "log of the frequency scale of the added modes (FE: 0)"),
-             Sampled("log_damping_scale", Prior("normal", 0.0, 1.0), 0.0, "-",
-                     "log of the damping multiplier (FE: 0)")),
-    physical=(Quantity("frequency_hz", "Hz", "first bending frequency"),
-              Quantity("damping_ratio", "-", "its damping ratio")),
-    make=lambda loc: FlexibleMode("flexible_mode", loc, 1))
+    side="plant", locations=tuple(_location(k) for k in range(1, N_PAIRS + 1)),
+    sampled=(Sampled("log_freq_scale_{location}", Prior("normal", 0.0, 0.03), 0.0, "-",
+                     "log of the pair's frequency scale (FE: 0)"),
+             Sampled("log_damping_scale_{location}", Prior("normal", 0.0, 1.0), 0.0, "-",
+                     "log of the pair's damping multiplier (FE: 0)")),
+    physical=(Quantity("frequency_hz", "Hz", "backward-whirl bending frequency"),
+              Quantity("forward_hz", "Hz", "forward-whirl bending frequency"),
+              Quantity("damping_ratio", "-", "backward-whirl damping ratio")),
+    repeatable=True, make=_make)
 FlexibleMode.entry = ENTRY

@@ -20,6 +20,7 @@ from bayes_amb.discrepancy.library import (
     bearing_coefficient,
     cross_coupling,
     flexible_mode,
+    residual_flexibility,
     runout,
     sensor_delay,
     sensor_gain,
@@ -30,7 +31,7 @@ from bayes_amb.discrepancy.library import (
 from bayes_amb.discrepancy.library.base import Candidate, EffectEntry
 
 _MODULES = (actuator_lag, actuator_2nd, time_delay, sensor_lag, sensor_delay, actuator_gain,
-            sensor_gain, cross_coupling, flexible_mode, unbalance, runout)
+            sensor_gain, cross_coupling, flexible_mode, residual_flexibility, unbalance, runout)
 
 REGISTRY: dict[str, EffectEntry] = {m.ENTRY.name: m.ENTRY for m in _MODULES}
 """The physics effects by name, in the order the diagnosis lists them."""

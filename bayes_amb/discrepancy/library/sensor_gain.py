@@ -16,7 +16,7 @@ class SensorGain(Candidate):
     """A calibration error of one displacement sensor: y_meas = (1 + g) y on that channel.
     Sampled: g (null 0), prior normal(0, 0.1)."""
 
-    def discrete(self, Ad, Bd, Cd, phi):
+    def discrete(self, Ad, Bd, Cd, phi, ctx):
         j = CHANNELS.index(self.location)
         Cd = np.array(np.broadcast_to(Cd, (phi.shape[0], *Cd.shape[-2:])))
         Cd[:, j, :] *= 1.0 + phi[:, 0][:, None]
