@@ -48,6 +48,7 @@ from bayes_amb.discrepancy.locate import (
     merge_spans,
     synchronous_speed,
 )
+from bayes_amb.discrepancy.revisit import revisit
 from bayes_amb.discrepancy.select import (
     FittedModel,
     Selection,
@@ -259,7 +260,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
                             max_effects=0 if checks.failed else opt.max_effects,
                             candidates=pool)
-    sel = select(nominal, sel_opt, priors, progress=say)
+    sel = revisit(select(nominal, sel_opt, priors, progress=say), priors, progress=say)
     if sel.accepted:
         say("refitting the chosen model with its own noise filters")
         sel.final = sel.accepted[-1] = own_noise_fit(sel.final)

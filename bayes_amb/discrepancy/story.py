@@ -61,6 +61,24 @@ def _noise(mm: dict[str, Any]) -> str:
             "counted as a mismatch.")
 
 
+def _swaps(cands: list[dict[str, Any]]) -> str:
+    """A sentence on the choices the revisit step (revisit.py) replaced, if any."""
+    named = {}
+    for c in cands:
+        if c.get("round") == "revisit" and c.get("log_bayes_factor") is not None \
+                and c.get("chosen_log_bayes_factor") is not None \
+                and c["log_bayes_factor"] > c["chosen_log_bayes_factor"]:
+            old = named.get(c["instead_of"])
+            if old is None or c["log_bayes_factor"] > old["log_bayes_factor"]:
+                named[c["instead_of"]] = c
+    if not named:
+        return ""
+    return "Once the later effects were in the model, " + "; ".join(
+        f"{c['effect']}@{c['location']} explained the data better than {k}, chosen first "
+        f"(log Bayes factor {c['log_bayes_factor']:.1f} against {c['chosen_log_bayes_factor']:.1f}"
+        " with the others held in the model), and replaced it" for k, c in named.items()) + "."
+
+
 def plain_language(report: dict[str, Any]) -> str:
     """One paragraph from the numbers of a diagnosis.json report."""
     mm = report["mismatch"]
@@ -101,6 +119,9 @@ def plain_language(report: dict[str, Any]) -> str:
                                      for k, v in e["params"].items())
                          + f"; log Bayes factor {e['score']:.1f})" for e in expl)
         text.append(f"Added to the model: {what}.")
+        swaps = _swaps(report.get("candidates", []))
+        if swaps:
+            text.append(swaps)
         fb, fa = report["fit"]["before"], report["fit"]["after"]
         chans = list(fb["nrmse"])
         nr = ", ".join(f"{c} {fb['nrmse'][c]:.3f} -> {fa['nrmse'][c]:.3f}" for c in chans)

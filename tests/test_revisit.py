@@ -1,0 +1,85 @@
+"""The revisit step (discrepancy/revisit.py): an earlier greedy choice is replaced by an
+alternative of its round when, with the later effects held in the model, the alternative's
+Bayes factor is larger; otherwise nothing changes. The fits are stubbed (their Bayes factors
+given) so that the bookkeeping is tested on its own; the foreign benchmark measures the
+effect on real recordings (pair_03: a 38 us delay first named as a second-order actuator)."""
+
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from bayes_amb.discrepancy import revisit as rv
+from bayes_amb.discrepancy.library import make_candidate
+from bayes_amb.discrepancy.select import Selection
+
+
+def _fm(cands, log_bf=None, log_odds=None):
+    return SimpleNamespace(candidates=tuple(cands), log_bf=log_bf, log_odds=log_odds,
+                           forward=SimpleNamespace(params=(), slices=[slice(0, 0)] * len(cands)),
+                           value=lambda n: 0.0)
+
+
+@pytest.fixture
+def setup(monkeypatch):
+    first = make_candidate("actuator_2nd@both")
+    second = make_candidate("sensor_lag@B")
+    r1 = _fm((first,), 11306.0, 11306.0 - np.log(34))
+    r2 = _fm((first, second), 1859.0, 1859.0 - np.log(34))
+    scores = [{"effect": "actuator_2nd", "location": "both", "round": 1,
+               "log_bayes_factor": 11306.0},
+              {"effect": "time_delay", "location": "controller", "round": 1,
+               "log_bayes_factor": 11055.0},
+              {"effect": "actuator_gain", "location": "Ax", "round": 1,
+               "log_bayes_factor": None},
+              {"effect": "sensor_lag", "location": "B", "round": 2,
+               "log_bayes_factor": 1859.0}]
+    sel = Selection(nominal=_fm(()), final=r2, accepted=[r1, r2], scores=scores)
+    monkeypatch.setattr(rv, "_without", lambda final, i: _fm((second,)))
+    monkeypatch.setattr(rv, "screen", lambda parent, cand, priors=None:
+                        rv.Screen(cand, 0.0, {}))
+    return sel, first, second
+
+
+def _refine_with(bfs, monkeypatch):
+    tried = []
+
+    def refine(parent, sc, priors=None):
+        tried.append(sc.candidate.key)
+        return _fm((*parent.candidates, sc.candidate), bfs[sc.candidate.key])
+    monkeypatch.setattr(rv, "refine", refine)
+    return tried
+
+
+def test_a_better_alternative_replaces_the_first_choice(setup, monkeypatch):
+    sel, first, second = setup
+    tried = _refine_with({"actuator_2nd@both": 3525.1, "time_delay@controller": 3536.8},
+                         monkeypatch)
+    out = rv.revisit(sel)
+    assert tried == ["actuator_2nd@both", "time_delay@controller"]   # never actuator_gain
+    assert [c.key for c in out.final.candidates] == ["sensor_lag@B", "time_delay@controller"]
+    assert [f.candidates[-1].key for f in out.accepted] == ["sensor_lag@B",
+                                                            "time_delay@controller"]
+    assert out.accepted[1].log_odds == pytest.approx(3536.8 - np.log(34))
+    row = [s for s in out.scores if s["round"] == "revisit"]
+    assert row[0]["instead_of"] == "actuator_2nd@both"
+    assert row[0]["chosen_log_bayes_factor"] == 3525.1
+
+
+def test_a_worse_alternative_changes_nothing(setup, monkeypatch):
+    sel, first, second = setup
+    final = sel.final
+    _refine_with({"actuator_2nd@both": 3540.0, "time_delay@controller": 3536.8}, monkeypatch)
+    out = rv.revisit(sel)
+    assert out.final is final
+    assert [f.candidates[-1] for f in out.accepted] == [first, second]
+
+
+def test_one_effect_is_not_revisited(monkeypatch):
+    c = make_candidate("sensor_lag@B")
+    sel = Selection(nominal=_fm(()), final=_fm((c,), 10.0), accepted=[_fm((c,), 10.0)],
+                    scores=[])
+    monkeypatch.setattr(rv, "refine", lambda *a, **k: pytest.fail("no refit expected"))
+    assert rv.revisit(sel) is sel
