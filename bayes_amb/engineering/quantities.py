@@ -234,10 +234,15 @@ def _sens_grid(rec: Recording, n_freq: int) -> NDArray:
 
 def physical_quantities(source: Any, recording: Recording,
                         speeds_rpm: NDArray | list[float] | None = None, n_draws: int = 200,
-                        model: str = "full", n_freq: int = 400, seed: int = 0,
-                        track: str = "frequency") -> EngineeringResult:
+                        model: str = "full", n_freq: int = 400, seed: int = 0
+                        ) -> EngineeringResult:
     """Bearing coefficients, closed-loop modes, API 617-style margins and ISO 14839-3 peak
     sensitivities, with 90 % intervals propagated from posterior draws.
+
+    The rigid-body modes are labelled rigid 1-4 in ascending order of frequency in every
+    draw, as API 617 mode tables number them; on the reference rig that is the labelling
+    eigenvalue continuation gives over the posterior, and each frequency is a continuous
+    function of theta.
 
     Parameters
     ----------
@@ -252,11 +257,6 @@ def physical_quantities(source: Any, recording: Recording,
         Draws used (evenly thinned).
     model : {"full", "reduced"}
         Plant the draws are put into: the full FE model (default) or the 8-state reduction.
-    track : {"frequency", "shape"}
-        How the rigid-body modes are labelled in every draw: by ascending frequency
-        (default; each frequency is then a continuous function of theta) or by matching
-        the nominal plant's mode shapes (a label follows its mode through a crossing, but
-        jumps where two modes veer).
     n_freq : int
         Frequencies of the sensitivity (log-spaced 1 Hz to Nyquist); each peak is refined
         by a bounded search between the neighbours of the grid maximum.
@@ -278,8 +278,6 @@ def physical_quantities(source: Any, recording: Recording,
     >>> r.quantities["bearing By: ks"].value
     500000.0
     """
-    if track not in ("frequency", "shape"):
-        raise BayesAmbError(f"option track: expected 'frequency' or 'shape', got {track!r}")
     draws = draws_from(source, n_draws, seed)
     run = float(recording.speed_rpm)
     speeds = np.array([0.8, 0.9, 1.0, 1.05]) * run if speeds_rpm is None \
@@ -301,8 +299,7 @@ def physical_quantities(source: Any, recording: Recording,
             sens_nom = nom.sensitivity_diag(base_f)
             peak_nom = _peaks(nom, base_f, sens_nom)
         for i, th in enumerate(draws.as_dicts()):
-            lm = closed_loop_modes(rig, ctrl, s, th, model,
-                                   reference=nom if track == "shape" else None)
+            lm = closed_loop_modes(rig, ctrl, s, th, model)
             lam[i, j] = lm.lam
             if j == i_run:
                 sens[i] = lm.sensitivity_diag(base_f)
