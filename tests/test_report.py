@@ -321,7 +321,7 @@ def test_answers_cli(made, capsys, tmp_path):
     run = collect_run(made["run"])
     api = physical_quantities(run, run.recording, [31500.0], n_draws=5, model="reduced")
     q = printed["quantities"]["bearing By: ks"]
-    assert q["hdi90"] == pytest.approx([api.quantities["bearing By: ks"].lo,
+    assert q["interval90"] == pytest.approx([api.quantities["bearing By: ks"].lo,
                                         api.quantities["bearing By: ks"].hi])
     assert main(["answers", str(made["run"]), "--speeds", "fast"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -40,24 +40,25 @@ def _legend_below(fig: Figure, ax: Any, ncol: int = 4) -> None:
 @styled
 def plot_modes_vs_speed(res: Any) -> Figure:
     """Frequency and log decrement of each closed-loop mode against speed (median and 90 %
-    interval over posterior draws), the 1x running-speed line and the API 617 log-dec
-    limit 0.1."""
+    interval over posterior draws, ``res.interval``: the tables' interval), the 1x
+    running-speed line and the API 617 log-dec limit 0.1."""
     from bayes_amb.engineering import API617_LOGDEC, MODE_LABELS, log_decrement
 
     fig = new_figure((7.2, 4.6))
     ax_f, ax_d = fig.subplots(1, 2)
     rpm = res.speeds_rpm
     for m, label in enumerate(MODE_LABELS):
-        lam = res.lam[:, :, m]
+        lam, lam_e = res.lam[:, :, m], res.lam_edge[:, :, m]
         f = lam.imag / (2 * np.pi)
-        d = log_decrement(lam)
         if not np.any(np.isfinite(f)):
             continue
         c = _MODE_COLOURS[m % len(_MODE_COLOURS)]
-        for ax, v in ((ax_f, f), (ax_d, d)):
+        for ax, v, ve in ((ax_f, f, lam_e.imag / (2 * np.pi)),
+                          (ax_d, log_decrement(lam), log_decrement(lam_e))):
             with warnings.catch_warnings():            # a speed where the mode is missing
                 warnings.simplefilter("ignore", RuntimeWarning)
-                lo, med, hi = np.nanquantile(v, [0.05, 0.5, 0.95], axis=0)
+                med = np.nanmedian(np.where(np.isfinite(v), v, np.nan), axis=0)
+            lo, hi = res.interval(v, ve)
             ax.errorbar(rpm, med, yerr=[med - lo, hi - med], color=c, marker="o", ms=3.5,
                         lw=1.2, capsize=3, label=label)
     ax_f.plot(rpm, rpm / 60.0, color="k", lw=1.0, ls="--", label="1x running speed")
@@ -83,12 +84,14 @@ def plot_modes_vs_speed(res: Any) -> Figure:
 
 @styled
 def plot_sensitivity_band(res: Any) -> Figure:
-    """|S| per axis at the running speed: posterior median and 90 % band, nominal plant,
-    and the ISO 14839-3 zone limits."""
+    """|S| per axis at the running speed: posterior median and 90 % band (``res.interval``
+    at every frequency), nominal plant, and the ISO 14839-3 zone limits."""
     fig = new_figure((7.2, 5.2))
     axes = fig.subplots(2, 2, sharex=True, sharey=True).ravel()
     f = res.sens_freq_hz
-    lo, med, hi = np.nanquantile(20 * np.log10(res.sens), [0.05, 0.5, 0.95], axis=0)
+    db = 20 * np.log10(res.sens)
+    med = np.nanmedian(db, axis=0)
+    lo, hi = res.interval(db, 20 * np.log10(res.sens_edge))
     for c, (ax, ch) in enumerate(zip(axes, CHANNELS, strict=True)):
         ax.fill_between(f, lo[:, c], hi[:, c], color=_BAND, alpha=0.25, lw=0,
                         label="identified plant, 90 % band")
