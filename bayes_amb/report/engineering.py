@@ -139,9 +139,10 @@ def engineering_section(run: RunData, opts: ReportOptions
     paras = [
         f"Each number is a function of θ, evaluated at {res.draws.theta.shape[0]} "
         f"{source}; the value is the median and the brackets the 90 % interval: the 5 % and "
-        "95 % quantiles, widened to the values at the draws within 1.645 standard "
-        "deviations (Mahalanobis) of the posterior mean, so that a quantity with a maximum "
-        "or minimum near the estimate (a mode frequency on a ridge) is not cut short. The "
+        "95 % quantiles, widened to the quantity's range over the posterior's central "
+        "region (within 1.645 standard deviations, Mahalanobis, of its mean), so that a "
+        "quantity with a maximum or minimum near the estimate (a mode frequency on a "
+        "ridge) is not cut short. The "
         "plant is the full FE model with the identified parameters, "
         "sampled at the recording's dt and closed with the controller that ran. "
         "'Nominal' is the same calculation with θ = 0 (the plant as designed). "
