@@ -4,9 +4,9 @@ from posterior draws.
 Reference tests build the sampled closed loop of the full 320-state plant by hand (truth
 plant of the simulator, scipy's matrix exponential, u = K y) and compare eigenvalues and
 sensitivities; identity tests check the log-decrement identities and the alias-free
-continuous equivalent; the statistical test checks that the 90 % interval of every derived
-quantity covers its truth in >= 85 % of 30 simulated recordings (on average; >= 23/30
-each).
+continuous equivalent; the statistical tests check that the 90 % interval of a quantity
+with a ridge maximum is calibrated over 1000 simulated posteriors, and that the interval of
+every derived quantity covers its truth in >= 26 of 30 simulated recordings (85 %).
 """
 
 from __future__ import annotations
@@ -21,8 +21,10 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.engineering import (
     MODE_LABELS,
     Draws,
+    central_region,
     closed_loop_modes,
     draws_from,
+    interval90,
     log_decrement,
     physical_quantities,
     required_separation_margin,
@@ -193,37 +195,44 @@ def coverage(n_rec: int, model: str, n_draws: int, names: tuple[str, ...] = ("k_
 
 
 N_REC = 30
-MIN_HITS = 23
-"""Hits of a calibrated 90 % interval in 30 recordings are Binomial(30, 0.9): P(hits <= 22)
-= 0.008, so fewer than 23 is evidence of miscalibration at 1 %. The issue's ">= 85 % of 30"
-(26) is not a test a calibrated interval passes reliably: P(hits < 26) = 0.18 per quantity,
-and all of ~8 distinct functions of (k_By, c_By) pass together in only ~45 % of seed sets
-(simulated with calibrated Gaussian z-scores). For rigid 3's frequency it is not even the
-expected count: see test_intervals_cover_the_truth_in_30_recordings. It is asserted on the
-mean over quantities."""
+MIN_HITS = 26
+"""The issue's target, ">= 85 % of 30" per quantity, asserted at fixed seeds (the test is
+deterministic). Hits of a calibrated 90 % interval are Binomial(30, 0.9) per quantity:
+P(hits <= 25) = 0.175, so on a fresh seed set a calibrated interval misses this bound for
+a given quantity about one time in six, and all of the ~8 distinct functions of (k_By,
+c_By) pass together only ~20-35 % of the time. The bound is therefore not a 1 % test of
+calibration (that would be hits <= 22, P = 0.008); it is a regression guard that these
+seeds pass with a margin of 0-2 hits, and it can fail: an interval with true coverage 0.8
+passes it with probability 0.26 per quantity, and the plain equal-tailed interval fails it
+here (rigid 3's frequency and separation margin 23/30). A change of seeds, draws or sampler
+that drops one quantity to 25/30 is not by itself evidence of miscalibration; look at
+test_interval_is_calibrated_on_the_rigid_3_ridge (1000 posteriors) before moving the
+bound."""
 
 
 def test_intervals_cover_the_truth_in_30_recordings():
     """Reduced truth, k_By = 0.3, c_By = 0.2, 0.5 s at 1 kHz, sensor noise 0.3 um; k_By and
-    c_By estimated (MAP + Laplace with correlations, 1000 draws each, through draws_from as
-    a report takes them), quantities from the reduced plant. Every quantity that depends on
-    theta: >= 23 of 30 (MIN_HITS); mean over the quantities >= 85 %.
+    c_By estimated (MAP + Laplace with correlations: 1000 draws through draws_from as a
+    report takes them, thinned evenly to physical_quantities' default 200), quantities from
+    the reduced plant with their interval (interval90: the equal-tailed interval widened to
+    the quantity's range over the central region). Every quantity that depends on theta:
+    >= 26 of 30 (MIN_HITS); mean over the quantities >= 85 %.
 
-    Measured (35-60 s on 2 cores, 230 s on a loaded one): 23 quantities; rigid 3
-    frequency and its separation margin 23/30, the others 26-27/30, mean 26.1/30 (87 %).
-    Rigid 3 is not mislabelled: by eigenvalue continuation the modes keep their
-    frequency order over the whole posterior (test_rigid_modes_keep_their_frequency_order),
-    and relabelling every 10th draw by MAC against the posterior median's modes changed no
-    label in any of the 30 recordings. Its frequency sits next to a ridge: rigid 3 and 4
-    veer near an exceptional point at (k_By, c_By) = (0.27, 0.16) (eigenvectors MAC 0.96 at
-    the truth), and at k_By = 0.3 rigid 3's frequency peaks at c_By = 0.19 (146.71 Hz; truth
-    146.66 Hz). Every posterior draw away from the ridge gives a lower value, so the 7 misses
-    all have the truth above the interval. An equal-tailed interval of such a function
-    undercovers even under an exactly calibrated posterior: 86.8 % in 2000 simulated
-    Gaussian posteriors with this test's sd (0.003, 0.018), i.e. 26.0 expected hits of 30,
-    and 23 or fewer with probability ~0.1. So >= 26/30 cannot be asserted for it.
+    Measured (23 s on 2 idle cores, about 4 min on a loaded one): 23 quantities, all
+    26-28/30, mean 89.9 %; rigid 3 frequency and separation margin 28/30.
+    With the equal-tailed interval alone (before): rigid 3 frequency and separation margin
+    23/30, the others 26-27/30, mean 87.1 %. Rigid 3 is not mislabelled: by eigenvalue
+    continuation the modes keep their frequency order over the whole posterior
+    (test_rigid_modes_keep_their_frequency_order), and relabelling every 10th draw by MAC
+    against the posterior median's modes changed no label in any of the 30 recordings. Its
+    frequency sits next to a ridge: rigid 3 and 4 veer near an exceptional point at (k_By,
+    c_By) = (0.27, 0.16) (eigenvectors MAC 0.96 at the truth), and at k_By = 0.3 rigid 3's
+    frequency peaks at c_By = 0.19 (146.71 Hz; truth 146.66 Hz). Every posterior draw away
+    from the ridge gives a lower value, so the 7 misses of the equal-tailed interval all had
+    the truth above it; it covers 85-86 % even under an exactly calibrated posterior
+    (test_interval_is_calibrated_on_the_rigid_3_ridge), the interval used now 91-92 %.
 
-    Before this test, with k_By and c_By estimated: 24-28/30. The likelihood's prewhitening
+    Earlier, with k_By and c_By estimated: 24-28/30. The likelihood's prewhitening
     FIR was designed from eps, whose low band is S(theta) x, and leakage left 1.39 x the
     modelled residual power in the 0-35 Hz bins (test_forward.py): c_By's z-scores had sd
     1.22 (1.06 now). The minimum log dec took the quantiles of the per-draw minimum, biased
@@ -238,22 +247,96 @@ def test_intervals_cover_the_truth_in_30_recordings():
     assert np.mean([np.mean(v) for v in hits.values()]) >= 0.85
 
 
-def test_interval_is_the_image_of_the_parameter_quantiles(rig, ctrl):
-    """ks = ks_nom (1 - theta) is monotone: its 90 % interval must be the image of the
-    5 % and 95 % quantiles of theta exactly, and the frequency of the first rigid mode
-    (monotone in k_By near the nominal) must lie between its values at those quantiles."""
+def test_interval_of_a_monotone_quantity_is_the_image_of_the_parameter_interval(rig, ctrl):
+    """ks = ks_nom (1 - theta) is monotone in the one parameter: its 90 % interval must be
+    the image of [min(q05, m - z s), max(q95, m + z s)] of theta exactly (m, s the draws'
+    mean and sd, z = 1.645: with one parameter the central region is that interval and its
+    edge points are its ends), and the frequency of the first rigid mode (monotone in k_By
+    near the nominal) must lie between its values at those ends."""
     rec = _empty_recording(rig, ctrl, 1e-3)
     th = np.random.default_rng(3).normal(0.3, 0.05, size=(200, 1))
     r = physical_quantities(Draws(("k_By",), th), rec, [SPEED], model="reduced")
+    m, s = th[:, 0].mean(), th[:, 0].std(ddof=1)
     q05, q95 = np.quantile(th[:, 0], [0.05, 0.95])
+    lo_th, hi_th = min(q05, m - 1.6448536269514722 * s), max(q95, m + 1.6448536269514722 * s)
     ks = r.quantities["bearing By: ks"]
-    assert ks.lo == pytest.approx(rig.ks * (1 - q95)) and ks.hi == pytest.approx(
-        rig.ks * (1 - q05))
+    assert ks.lo == pytest.approx(rig.ks * (1 - hi_th), rel=1e-12)
+    assert ks.hi == pytest.approx(rig.ks * (1 - lo_th), rel=1e-12)
+    assert r.region.edge.shape == (np.sum(np.abs(th[:, 0] - m) > 1.6448536269514722 * s), 1)
     ends = [closed_loop_modes(rig, ctrl[1e-3], SPEED, {"k_By": v}, "reduced").lam[0].imag
-            / (2 * np.pi) for v in (q05, q95)]
+            / (2 * np.pi) for v in (lo_th, hi_th)]
     f1 = r.quantities[f"rigid 1: frequency @ {SPEED:.0f} rpm"]
     assert min(ends) - 1e-3 <= f1.lo <= f1.hi <= max(ends) + 1e-3   # Hz
     assert f1.lo < f1.hi
+
+
+def test_interval_reaches_a_maximum_that_the_quantiles_miss():
+    """A quantity with a maximum inside the central region (1 - theta_2^2 at theta = 0):
+    the 95 % quantile of its draws stays below 1, the interval reaches 1 to within the
+    edge point's distance; and a linear quantity's interval holds the equal-tailed one."""
+    th = np.random.default_rng(0).standard_normal((400, 2))
+    reg = central_region(th)
+    v = 1.0 - th[:, 1] ** 2
+    lo, hi = interval90(v, reg.inside, 1.0 - reg.edge[:, 1] ** 2)
+    assert np.quantile(v, 0.95) < 0.999 and hi > 0.999
+    lin = th @ [1.0, 2.0]
+    lo, hi = interval90(lin, reg.inside, reg.edge @ [1.0, 2.0])
+    q05, q95 = np.quantile(lin, [0.05, 0.95])
+    # widened only by the sampling error of the quantiles (sd/sqrt(400) scale), here < 5 %
+    assert lo <= q05 and hi >= q95 and (hi - lo) < 1.05 * (q95 - q05)
+
+
+@pytest.mark.parametrize(("inside", "edge", "match"), [
+    (np.ones(3, bool), None, "inside has shape"),
+    (np.ones(4, bool), np.zeros((2, 3)), "edge_values has shape"),
+])
+def test_interval_rejects_mismatched_shapes(inside, edge, match):
+    with pytest.raises(BayesAmbError, match=match):
+        interval90(np.zeros((4, 2)), inside, edge)
+
+
+def test_central_region_needs_p_plus_2_draws():
+    """With fewer draws than p + 2 the covariance is not estimable: nothing inside, no
+    edge, so the interval is the equal-tailed one."""
+    reg = central_region(np.arange(6.0).reshape(3, 2))
+    assert not reg.inside.any() and reg.edge.shape == (0, 2)
+    v = np.array([1.0, 5.0, 3.0])
+    np.testing.assert_allclose(interval90(v, reg.inside, v[:0]), np.quantile(v, [0.05, 0.95]))
+
+
+def test_interval_is_calibrated_on_the_rigid_3_ridge(rig, ctrl):
+    """Rigid 3's frequency on the reduced plant at 1 kHz peaks on a ridge beside the truth
+    (k_By, c_By) = (0.3, 0.2) (146.66 Hz; 146.71 Hz at c_By = 0.19). Over 1000 simulated
+    calibrated posteriors (MAP ~ N(truth, C), 200 draws ~ N(MAP, C), C = diag(0.0032,
+    0.0176)^2, the coverage test's Laplace sd), with the frequency interpolated on a grid of
+    the exact function, the interval covers the truth in 0.9 +- 3 binomial sd (0.872 to
+    0.928) or a little more, while the equal-tailed interval undercovers.
+
+    Measured: interval 0.909, equal-tailed 0.851; with 2000 posteriors, every rigid mode's
+    frequency and damping ratio and ks at 0.896-0.944 (equal-tailed 0.850-0.923), widths
+    +3 % (+9 % for rigid 3 and 4). The image of the joint 90 % region (chi-square, 2 dof)
+    would cover 0.977 and the upper bound 0.96 fails it. Grid 41 x 73; 1 s."""
+    from scipy.interpolate import RegularGridInterpolator
+
+    K, C = np.linspace(0.27, 0.33, 41), np.linspace(0.06, 0.34, 73)
+    f3 = np.array([[closed_loop_modes(rig, ctrl[1e-3], SPEED, {"k_By": k, "c_By": c},
+                                      "reduced").lam[2].imag / (2 * np.pi) for c in C]
+                   for k in K])
+    f = RegularGridInterpolator((K, C), f3, bounds_error=False, fill_value=None)
+    truth, sd = np.array([0.3, 0.2]), np.array([0.0032, 0.0176])
+    t = float(f(truth[None])[0])
+    rng = np.random.default_rng(5)
+    hit, hit_et, n = 0, 0, 1000
+    for _ in range(n):
+        th = truth + sd * rng.standard_normal(2) + sd * rng.standard_normal((200, 2))
+        v, reg = f(th), central_region(th)
+        lo, hi = interval90(v, reg.inside, f(reg.edge))
+        hit += lo <= t <= hi
+        q05, q95 = np.quantile(v, [0.05, 0.95])
+        hit_et += q05 <= t <= q95
+    band = 3 * np.sqrt(0.9 * 0.1 / n)
+    assert 0.9 - band <= hit / n <= 0.96, hit / n
+    assert hit_et / n < 0.9 - band, hit_et / n
 
 
 def test_rigid_modes_keep_their_frequency_order(rig, ctrl):

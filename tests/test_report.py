@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import io
+import itertools
 import json
 import re
 import shutil
@@ -199,6 +200,34 @@ def test_optional_sections_when_inputs_present(bare):
     assert run.recording is None and run.diagnosis is not None
 
 
+@pytest.mark.parametrize(("unexplained", "shown"), [
+    ({"present": True, "channels": ["Ax", "By"], "bands_hz": [[2606.0, 3606.0]],
+      "findings": [{"test": "coherence", "p_adjusted": 6e-4}],
+      "estimate": {"band_hz": [[2.0, 36.0]], "channels": {"Ax": {"magnitude": [5.9]}}},
+      "meaning": "structure coherent with the excitation"},
+     "structure coherent with the excitation on channel(s) Ax, By in 2606–3606 Hz that no "
+     "model in the library explains"),
+    ({"present": False, "channels": [], "bands_hz": [], "findings": []}, None),
+    ("a lag near 900 Hz", "a lag near 900 Hz"),
+])
+def test_summary_states_the_unexplained_part_in_words(bare, unexplained, shown):
+    """diagnosis.json's "unexplained" is a dict since the physics library (a string
+    before): the summary names channels and bands in one clause, never the dict itself
+    (the demo's summary printed its repr over two pages), and says nothing when
+    "present" is false."""
+    from bayes_amb.report.render import summary_section
+
+    run = bare[0]
+    diagnosis = dict(run.diagnosis, unexplained=unexplained)
+    sec = summary_section(dataclasses.replace(run, diagnosis=diagnosis), {})
+    text = " ".join(sec.bullets + sec.paragraphs)
+    assert "{" not in text and "present" not in text
+    if shown is None:
+        assert "unexplained" not in text
+    else:
+        assert f"leaves part of the mismatch unexplained: {shown}" in text
+
+
 def test_matplotlib_pdf_fallback(bare, tmp_path):
     _, sections, meta, _ = bare
     path = tmp_path / "fallback.pdf"
@@ -284,6 +313,106 @@ def test_every_report_figure_prints_fonts_of_at_least_7pt(made, cli_report):
     assert not {k: v for k, v in small.items() if v}
 
 
+def _candidates_report(n_rounds: int = 3, n_per_round: int = 37) -> dict:
+    """A diagnosis with as many candidates as the demo's (37 per round, long labels)."""
+    rng = np.random.default_rng(0)
+    effects = [("bearing_coefficient", f"{k}_{ch}") for k in "ck" for ch in ("Ax", "Ay", "Bx")]
+    effects += [(e, loc) for e in ("actuator_lag", "sensor_lag", "actuator_2nd")
+                for loc in ("A", "B", "both")]
+    effects += [("flexible_mode", "bending pair 1"), ("time_delay", "controller")]
+    effects += [(e, ch) for e in ("sensor_gain", "actuator_gain", "runout")
+                for ch in ("Ax", "Ay", "Bx", "By")]
+    effects += [("unbalance", n) for n in ("D1", "D2", "n14", "n20", "n27")]
+    effects = (effects * 2)[:n_per_round]
+    rows = [{"round": r, "effect": e, "location": loc,
+             "screen_gain": float(rng.lognormal(0, 2)) * (1 if i % 5 else -1),
+             "log_bayes_factor": float(rng.normal(5, 5)) if i < 3 else None}
+            for r in range(1, n_rounds + 1) for i, (e, loc) in enumerate(effects)]
+    return {"candidates": rows, "criterion": "accept above log posterior odds 3",
+            "explanations": [{"effect": effects[0][0], "location": effects[0][1]}]}
+
+
+def test_candidate_figure_is_legible():
+    """The evidence figure of a diagnosis with 37 candidates per round (the demo's): every
+    text >= 7 pt as printed, no two candidate labels of a panel overlap (they were ~5 pt
+    and overlapping, issue 17), the fitted candidates all shown, the legend outside the
+    axes."""
+    from bayes_amb.plots.discrepancy import CANDIDATES_SHOWN, plot_candidates
+
+    report = _candidates_report()
+    fig = plot_candidates(report)
+    small = [(round(size, 2), t[:30]) for size, t in _visible_font_sizes(fig) if size < 7.0]
+    assert not small, small
+    renderer = fig.canvas.get_renderer()
+    panels = [ax for ax in fig.axes if ax.get_visible()]
+    assert len(panels) == 3
+    for ax in panels:
+        labels = [t for t in ax.get_yticklabels() if t.get_text()]
+        assert len(labels) == CANDIDATES_SHOWN
+        boxes = sorted((t.get_window_extent(renderer) for t in labels), key=lambda b: b.y0)
+        assert all(lo.y1 <= hi.y0 for lo, hi in itertools.pairwise(boxes)), ax.get_title()
+        assert ax.get_legend() is None
+        shown = {t.get_text() for t in labels}
+        fitted = [r for r in report["candidates"] if r["log_bayes_factor"] is not None
+                  and f"round {r['round']}" in ax.get_title()]
+        assert all(f"{r['effect']}@{r['location']}" in shown or r["location"] in shown
+                   for r in fitted)
+    assert len(fig.legends) == 1
+
+
+def test_posterior_figure_labels_do_not_collide():
+    """The paper case's labels (issue 17 review of the demo PDF): in the pair plot the
+    bottom row's x labels, one with its "1e-7" multiplier folded in, do not overlap each
+    other; in the trace plot (rows ~1.1 in tall) the y labels do not overlap."""
+    from bayes_amb.plots.posterior import plot_pair, plot_trace
+
+    rng = np.random.default_rng(0)
+    draws = {"k": 1e-7 * rng.standard_normal((24, 300)), "n": 1e-3 * rng.random((24, 300)),
+             "r1": -12 + 0.3 * rng.random((24, 300)), "r2": 1e-2 * rng.random((24, 300))}
+    labels = {"k": "k_By (θ) − 0.5", "n": "log10 σ_noise (m) + 12", "r1": "log10 σ_r1 (m)",
+              "r2": "log10 σ_r2 (A) + 8"}
+    for fig, axis in ((plot_pair(draws, labels, {"k": 0.0}, {"k": 0.0}), "x"),
+                      (plot_trace(draws, labels, {"k": 0.0}, {"k": 0.0}), "y")):
+        fig.canvas.draw()
+        r = fig.canvas.get_renderer()
+        boxes = [getattr(ax, f"{axis}axis").label.get_window_extent(r) for ax in fig.axes
+                 if ax.get_visible() and getattr(ax, f"get_{axis}label")()]
+        lo = (lambda b: b.x0) if axis == "x" else (lambda b: b.y0)
+        hi = (lambda b: b.x1) if axis == "x" else (lambda b: b.y1)
+        boxes.sort(key=lo)
+        assert len(boxes) >= 4
+        assert all(hi(a) <= lo(c) for a, c in itertools.pairwise(boxes)), axis
+    pair = plot_pair(draws, labels, {"k": 0.0}, {"k": 0.0})
+    pair.canvas.draw()
+    bottom = [ax for ax in pair.axes if ax.get_visible() and ax.get_xlabel()]
+    assert "(×1e−7)" in bottom[0].get_xlabel()
+    assert not bottom[0].xaxis.get_offset_text().get_visible()
+
+
+@pytest.mark.parametrize(("low", "high"), [(0.3, 6.0), (0.9, 1.5), (1e-3, 1e3)])
+def test_predictive_frf_tick_labels_do_not_collide(low, high):
+    """The paper case's |eps/x| dips and rises within about a decade on some channels
+    (0.3 to 6 x 1e-3 um/A): matplotlib labelled the minor ticks of the log axis and 5 of
+    the 8 labels ran into each other (issue 17 review of the demo PDF; this test's
+    (0.3, 6) case on the old code). Any span: no two y tick labels of a magnitude panel
+    overlap, minor or major, and each has at least two."""
+    from bayes_amb.plots.engineering import plot_predictive_frf
+
+    f = np.logspace(1.3, 2.7, 60)
+    shape = np.concatenate([np.geomspace(1.0, low, 40), np.geomspace(low, high, 20)])
+    fig = plot_predictive_frf(f, 1e-9 * shape[:, None] * np.ones((1, 4)), np.ones((60, 4)),
+                              1e-9 * np.ones((40, 60, 4)), 400.0)
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    for ax in (a for a in fig.axes if a.get_title()):
+        lo, hi = ax.get_ylim()
+        labels = [t for t in [*ax.get_yticklabels(), *ax.get_yticklabels(minor=True)]
+                  if t.get_text() and lo <= t.get_position()[1] <= hi]
+        boxes = sorted((t.get_window_extent(r) for t in labels), key=lambda b: b.y0)
+        assert all(a.y1 <= b.y0 for a, b in itertools.pairwise(boxes)), (low, high)
+        assert len(boxes) >= 2, (low, high, ax.get_title())
+
+
 def test_print_css_has_no_text_under_7pt():
     """The PDF style sheet (the template's print media block) sets no font size under 7 pt
     (the <pre> of the command line was 6.5 pt)."""
@@ -321,7 +450,7 @@ def test_answers_cli(made, capsys, tmp_path):
     run = collect_run(made["run"])
     api = physical_quantities(run, run.recording, [31500.0], n_draws=5, model="reduced")
     q = printed["quantities"]["bearing By: ks"]
-    assert q["hdi90"] == pytest.approx([api.quantities["bearing By: ks"].lo,
+    assert q["interval90"] == pytest.approx([api.quantities["bearing By: ks"].lo,
                                         api.quantities["bearing By: ks"].hi])
     assert main(["answers", str(made["run"]), "--speeds", "fast"]) == 2
     err = capsys.readouterr().err.strip().splitlines()

@@ -45,6 +45,7 @@ def _speeds(text: str | None) -> list[float] | None:
 
 def run(args: argparse.Namespace) -> int:
     from bayes_amb.engineering import physical_quantities
+    from bayes_amb.engineering.quantities import INTERVAL_TEXT
     from bayes_amb.io.atomic import write_text_atomic
     from bayes_amb.report.collect import collect_run
 
@@ -66,6 +67,7 @@ def run(args: argparse.Namespace) -> int:
     lines = [f"{k:<52} {q.value:>12.5g}  [{q.lo:.5g}, {q.hi:.5g}]  {q.unit}"
              + ("" if q.estimated else "  (not estimated)")
              for k, q in res.quantities.items()]
-    head = [*res.notes, f"from {source}", "quantity  median  [90 % interval]  unit"]
+    head = [*res.notes, f"from {source}", f"interval {INTERVAL_TEXT}",
+            "quantity  median  [90 % interval]  unit"]
     emit(data, "\n".join([*head, *lines]), args.json)
     return 0

@@ -21,17 +21,22 @@ from bayes_amb.engineering.loop import (
 )
 from bayes_amb.engineering.quantities import (
     API617_LOGDEC,
+    CENTRAL_Z,
+    CentralRegion,
     Draws,
     EngineeringResult,
     Quantity,
+    central_region,
     draws_from,
+    interval90,
     physical_quantities,
     required_separation_margin,
 )
 from bayes_amb.engineering.snr import excitation_response, response_snr_db
 
-__all__ = ["API617_LOGDEC", "MODE_LABELS", "Draws", "EngineeringResult", "FrfEstimate",
-           "FrfResult", "LoopModes", "Quantity", "closed_loop_modes", "controller_response",
-           "draws_from", "excitation_response", "frequency_responses", "joint_io_frf",
+__all__ = ["API617_LOGDEC", "CENTRAL_Z", "MODE_LABELS", "CentralRegion", "Draws",
+           "EngineeringResult", "FrfEstimate", "FrfResult", "LoopModes", "Quantity",
+           "central_region", "closed_loop_modes", "controller_response", "draws_from",
+           "excitation_response", "frequency_responses", "interval90", "joint_io_frf",
            "log_decrement", "physical_quantities", "plant_matrices",
            "required_separation_margin", "response_snr_db"]

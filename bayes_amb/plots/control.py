@@ -44,7 +44,7 @@ def _pz(ax, sets: Sequence[PoleZeroSet], zero_label: str) -> None:
 def plot_pole_zero_continuous(sets: Sequence[PoleZeroSet], title: str,
                               zero_label: str = "zeros") -> Figure:
     """Pole-zero map in the s-plane (rad/s), right half-plane shaded (Fig. 6)."""
-    fig, ax = new_axes(figsize=(6.4, 4.4))
+    fig, ax = new_axes(figsize=(6.4, 3.3))
     pts = np.concatenate([np.concatenate([s.poles, s.zeros]) for s in sets])
     pts = pts[np.isfinite(pts)]
     r = 1.15 * float(np.max(np.abs(pts))) if pts.size else 1.0
@@ -71,7 +71,7 @@ def plot_pole_zero_discrete(sets: Sequence[PoleZeroSet], title: str, dt: float,
     pts = pts[np.isfinite(pts)]
     near = pts[np.abs(pts - 1) < 0.2]
     zoom = near.size >= max(2, pts.size // 2)
-    fig = new_figure((8.0, 4.2) if zoom else (6.4, 3.9))
+    fig = new_figure((8.0, 3.5) if zoom else (6.4, 3.2))
     axes = fig.subplots(1, 2) if zoom else [fig.add_subplot()]
     phi = np.linspace(0.0, 2 * np.pi, 400)
     for a in axes:

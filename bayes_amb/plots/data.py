@@ -106,7 +106,7 @@ def plot_correlations(lags_auto: NDArray, acf: NDArray, bound: float, lags_cross
     excitation channel j, bound_cross (4,); lags in samples, dt in s for the axis label.
     """
     sym = excitation_label(port)[0]
-    fig, axes = _grid(4, 2, (8.0, 6.6), sharex="col")
+    fig, axes = _grid(4, 2, (8.0, 5.4), sharex="col")
     for j, ch in enumerate(CHANNELS):
         for a, lags, r, b in ((axes[j, 0], lags_auto[1:], acf[1:, j], bound),
                               (axes[j, 1], lags_cross, ccf[:, j], bound_cross[j])):

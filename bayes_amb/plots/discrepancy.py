@@ -30,7 +30,7 @@ def plot_location(ds: xr.Dataset, report: dict[str, Any]) -> Figure:
     """Top: multiple coherence of the nominal residual with the excitation per band and
     channel (markers where significant after Holm correction). Bottom: residual power over
     the fitted noise floor per band. Shaded: the located bands."""
-    fig, axes = _grid(2, 1, (8.0, 5.6), sharex=True)
+    fig, axes = _grid(2, 1, (8.0, 4.2), sharex=True)
     f = np.sqrt(ds["band_lo_hz"].values * ds["band_hi_hz"].values)
     mm = report["mismatch"]
     sig = {(x["band_hz"][0], c) for x in mm.get("findings", [])
@@ -44,13 +44,14 @@ def plot_location(ds: xr.Dataset, report: dict[str, Any]) -> Figure:
         axes[1, 0].semilogx(f, ds["floor_ratio"].values[:, j], marker=".", lw=1.0, label=ch)
     for ax in axes[:, 0]:
         _shade(ax, mm.get("bands_hz", []))
-    axes[0, 0].set_ylabel("coherence with excitation")
+    axes[0, 0].set_ylabel("coherence with\nexcitation")
     axes[0, 0].set_title("Nominal residual: part explained by the excitation "
                          "(circles: significant, family-wise 1 %)")
     axes[1, 0].axhline(1.0, color="k", lw=0.8, ls="--")
-    axes[1, 0].set_ylabel("residual power / noise floor")
+    axes[1, 0].set_ylabel("residual power /\nnoise floor")
     axes[1, 0].set_xlabel("frequency (Hz)")
-    axes[0, 0].legend(ncols=4, fontsize=8, loc="upper right")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=4, fontsize=8.5)
     return fig
 
 
@@ -58,7 +59,7 @@ def plot_location(ds: xr.Dataset, report: dict[str, Any]) -> Figure:
 def plot_residual_spectra(ds: xr.Dataset, bands: list[list[float]] | None = None) -> Figure:
     """Welch spectra per channel: eps (grey), residual of the nominal model (orange) and of
     the model with the named physics (blue)."""
-    fig, axes = _grid(2, 2, (8.0, 5.6), sharex=True)
+    fig, axes = _grid(2, 2, (8.0, 4.2), sharex=True)
     f = ds["freq"].values
     keep = f > 0
     for j, ch in enumerate(CHANNELS):
@@ -75,45 +76,69 @@ def plot_residual_spectra(ds: xr.Dataset, bands: list[list[float]] | None = None
             ax.set_ylabel("PSD (µm²/Hz)")
         if j >= 2:
             ax.set_xlabel("frequency (Hz)")
-    axes[0, 0].legend(fontsize=8, loc="lower left")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=8.5)
     return fig
 
 
+CANDIDATES_SHOWN = 8
+"""Candidates drawn per round in :func:`plot_candidates`: every one fitted fully, then the
+best by screening gain (the report's table lists them all)."""
+
+
+def _candidate_label(row: dict[str, Any]) -> str:
+    """'c_Ax' for a bearing coefficient (its location is the parameter), else
+    'effect@location'."""
+    if row["effect"] == "bearing_coefficient":
+        return str(row["location"])
+    return f"{row['effect']}@{row['location']}"
+
+
 @styled
-def plot_candidates(report: dict[str, Any]) -> Figure:
-    """Evidence per candidate and round: screening gain (all) and log Bayes factor (fitted
-    ones), with the acceptance threshold."""
+def plot_candidates(report: dict[str, Any], shown: int = CANDIDATES_SHOWN) -> Figure:
+    """Evidence per candidate and round: screening gain and log Bayes factor (fitted ones),
+    with the acceptance threshold; per round the candidates fitted fully and the best of
+    the others by screening gain, ``shown`` in all, best first."""
     rows = report["candidates"]
     rounds = sorted({r["round"] for r in rows})
     ncol = min(2, len(rounds))
     nrow = -(-len(rounds) // ncol)
-    fig, axes = _grid(nrow, ncol, (7.2, min(4.2 * nrow, 8.8)), sharey=False)
+    per_round = []
+    for rnd in rounds:
+        rs = [r for r in rows if r["round"] == rnd]
+        fitted = [r for r in rs if r["log_bayes_factor"] is not None]
+        rest = sorted((r for r in rs if r["log_bayes_factor"] is None),
+                      key=lambda r: -(r["screen_gain"] or -np.inf))
+        pick = (fitted + rest)[:max(shown, len(fitted))]
+        per_round.append((rnd, sorted(pick, key=lambda r: -(r["screen_gain"] or -np.inf)),
+                          len(rs)))
+    n_max = max(len(p) for _, p, _ in per_round)
+    fig, axes = _grid(nrow, ncol, (7.2, nrow * (0.9 + 0.18 * n_max) + 0.4), sharey=False)
     for extra in range(len(rounds), nrow * ncol):
         axes[extra // ncol, extra % ncol].set_visible(False)
     thr = float(report.get("criterion", "3").split()[-1]) if report.get("criterion") else 3.0
     accepted = {(e["effect"], e["location"]) for e in report["explanations"]}
-    for k, rnd in enumerate(rounds):
+    for k, (rnd, rs, n_all) in enumerate(per_round):
         ax = axes[k // ncol, k % ncol]
-        rs = [r for r in rows if r["round"] == rnd]
-        labels = [f"{r['effect']}@{r['location']}" for r in rs]
-        gain = [max(r["screen_gain"] or 0.0, 1e-2) for r in rs]
         y = np.arange(len(rs))
+        gain = [max(r["screen_gain"] or 0.0, 1e-2) for r in rs]
         ax.barh(y, gain, color="#cfd8e3", label="screening gain (nats)")
-        bf = [(i, r["log_bayes_factor"]) for i, r in enumerate(rs)
-              if r["log_bayes_factor"] is not None]
-        for i, v in bf:
-            acc = (rs[i]["effect"], rs[i]["location"]) in accepted
-            ax.plot(max(v, 1e-2), i, "D", color=_AFTER if acc else _BEFORE, ms=6)
+        for i, r in enumerate(rs):
+            if r["log_bayes_factor"] is not None:
+                acc = (r["effect"], r["location"]) in accepted
+                ax.plot(max(r["log_bayes_factor"], 1e-2), i, "D",
+                        color=_AFTER if acc else _BEFORE, ms=6)
         ax.axvline(thr, color="k", ls="--", lw=0.8)
         ax.set_xscale("log")
-        ax.set_yticks(y, labels, fontsize=8)
-        ax.invert_yaxis()
-        ax.set_title(f"round {rnd}")
+        ax.set_yticks(y, [_candidate_label(r) for r in rs], fontsize=8)
+        ax.set_ylim(len(rs) - 0.5, -0.5)
+        ax.set_title(f"round {rnd}" + (f" (best {len(rs)} of {n_all})" if n_all > len(rs)
+                                       else ""), fontsize=9.5)
         ax.set_xlabel("nats (log scale)")
     axes[0, 0].plot([], [], "D", color=_AFTER, label="log BF, accepted")
     axes[0, 0].plot([], [], "D", color=_BEFORE, label="log BF, rejected")
     handles, labs = axes[0, 0].get_legend_handles_labels()
-    fig.legend(handles, labs, loc="outside lower center", ncols=3, fontsize=8)
+    fig.legend(handles, labs, loc="outside lower center", ncols=3, fontsize=8.5)
     return fig
 
 
@@ -140,7 +165,7 @@ def plot_parameters(report: dict[str, Any], truth: dict[str, float] | None = Non
     known."""
     pb, pa = report["parameters_before"], report["parameters_after"]
     names = list(pb)
-    fig, axes = _grid(1, 1, (6.0, 0.8 + 0.7 * len(names)))
+    fig, axes = _grid(1, 1, (6.0, 1.1 + 0.6 * len(names)))
     ax = axes[0, 0]
     for i, n in enumerate(names):
         for off, src, col, lab in ((-0.12, pb, _BEFORE, "nominal model"),
@@ -154,7 +179,8 @@ def plot_parameters(report: dict[str, Any], truth: dict[str, float] | None = Non
     ax.set_yticks(range(len(names)), names)
     ax.invert_yaxis()
     ax.set_xlabel("θ (dimensionless); bars: 90 % HDI")
-    ax.legend(fontsize=8, loc="best")
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncols=3, fontsize=8.5)
     return fig
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogLocator, NullFormatter
+from matplotlib.ticker import FuncFormatter, LogLocator, MaxNLocator, NullFormatter
 
 from bayes_amb.control.robustness import ISO_ZONES
 from bayes_amb.plots.style import new_figure, styled
@@ -32,6 +32,24 @@ def _log_x(ax: Any) -> None:
     ax.xaxis.set_minor_formatter(NullFormatter())
 
 
+def _log_y(ax: Any) -> None:
+    """Log magnitude axis whose tick labels do not collide at the report's panel heights.
+
+    Spanning under about a decade, matplotlib labels the minor ticks (or falls back to
+    fine linear steps), and the labels run into each other; under two decades it shows
+    one or two labels at most. Such an axis (under two decades) gets ticks at 1, 2 and 5
+    per decade, or, under a factor 6.25 (fewer than two of those), three linear steps,
+    labelled in plain numbers; minor ticks are never labelled."""
+    ax.set_yscale("log")
+    lo, hi = ax.get_ylim()
+    ratio = hi / lo if lo > 0 else np.inf
+    if ratio < 100.0:
+        ax.yaxis.set_major_locator(LogLocator(base=10.0, subs=(1.0, 2.0, 5.0))
+                                   if ratio >= 6.25 else MaxNLocator(nbins=3))
+        ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:.2g}"))
+    ax.yaxis.set_minor_formatter(NullFormatter())
+
+
 def _legend_below(fig: Figure, ax: Any, ncol: int = 4) -> None:
     handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=ncol, fontsize=8.5)
@@ -40,24 +58,25 @@ def _legend_below(fig: Figure, ax: Any, ncol: int = 4) -> None:
 @styled
 def plot_modes_vs_speed(res: Any) -> Figure:
     """Frequency and log decrement of each closed-loop mode against speed (median and 90 %
-    interval over posterior draws), the 1x running-speed line and the API 617 log-dec
-    limit 0.1."""
+    interval over posterior draws, ``res.interval``: the tables' interval), the 1x
+    running-speed line and the API 617 log-dec limit 0.1."""
     from bayes_amb.engineering import API617_LOGDEC, MODE_LABELS, log_decrement
 
-    fig = new_figure((7.2, 4.6))
+    fig = new_figure((7.2, 3.9))
     ax_f, ax_d = fig.subplots(1, 2)
     rpm = res.speeds_rpm
     for m, label in enumerate(MODE_LABELS):
-        lam = res.lam[:, :, m]
+        lam, lam_e = res.lam[:, :, m], res.lam_edge[:, :, m]
         f = lam.imag / (2 * np.pi)
-        d = log_decrement(lam)
         if not np.any(np.isfinite(f)):
             continue
         c = _MODE_COLOURS[m % len(_MODE_COLOURS)]
-        for ax, v in ((ax_f, f), (ax_d, d)):
+        for ax, v, ve in ((ax_f, f, lam_e.imag / (2 * np.pi)),
+                          (ax_d, log_decrement(lam), log_decrement(lam_e))):
             with warnings.catch_warnings():            # a speed where the mode is missing
                 warnings.simplefilter("ignore", RuntimeWarning)
-                lo, med, hi = np.nanquantile(v, [0.05, 0.5, 0.95], axis=0)
+                med = np.nanmedian(np.where(np.isfinite(v), v, np.nan), axis=0)
+            lo, hi = res.interval(v, ve)
             ax.errorbar(rpm, med, yerr=[med - lo, hi - med], color=c, marker="o", ms=3.5,
                         lw=1.2, capsize=3, label=label)
     ax_f.plot(rpm, rpm / 60.0, color="k", lw=1.0, ls="--", label="1x running speed")
@@ -83,12 +102,14 @@ def plot_modes_vs_speed(res: Any) -> Figure:
 
 @styled
 def plot_sensitivity_band(res: Any) -> Figure:
-    """|S| per axis at the running speed: posterior median and 90 % band, nominal plant,
-    and the ISO 14839-3 zone limits."""
-    fig = new_figure((7.2, 5.2))
+    """|S| per axis at the running speed: posterior median and 90 % band (``res.interval``
+    at every frequency), nominal plant, and the ISO 14839-3 zone limits."""
+    fig = new_figure((7.2, 4.4))
     axes = fig.subplots(2, 2, sharex=True, sharey=True).ravel()
     f = res.sens_freq_hz
-    lo, med, hi = np.nanquantile(20 * np.log10(res.sens), [0.05, 0.5, 0.95], axis=0)
+    db = 20 * np.log10(res.sens)
+    med = np.nanmedian(db, axis=0)
+    lo, hi = res.interval(db, 20 * np.log10(res.sens_edge))
     for c, (ax, ch) in enumerate(zip(axes, CHANNELS, strict=True)):
         ax.fill_between(f, lo[:, c], hi[:, c], color=_BAND, alpha=0.25, lw=0,
                         label="identified plant, 90 % band")
@@ -175,7 +196,7 @@ def plot_predictive_frf(freq_hz: Any, measured: Any, coherence: Any, draws: Any,
             for a in (ax, axc):
                 a.axvline(band_hz, color="0.4", lw=0.8, ls=":")
         _log_x(ax)
-        ax.set_yscale("log")
+        _log_y(ax)
         ax.set_title(f"{ch} → {ch}")
         ax.set_ylabel("|ε/x| (µm/A)")
         ax.tick_params(labelbottom=False)

@@ -8,6 +8,8 @@ Dense artists are rasterised so that SVG output stays small while text stays vec
 
 from __future__ import annotations
 
+import re
+import textwrap
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -50,7 +52,7 @@ def plot_trace(draws: dict[str, NDArray], labels: dict[str, str],
                truth: dict[str, float], point: dict[str, float]) -> Figure:
     """Trace (left: every walker against draw index) and marginal histogram (right)."""
     names = list(draws)
-    fig, axes = _grid(len(names), 2, (8.0, 1.55 * len(names) + 1.0),
+    fig, axes = _grid(len(names), 2, (8.0, 1.1 * len(names) + 0.9),
                       width_ratios=(2.6, 1.0))
     for i, n in enumerate(names):
         d = draws[n]
@@ -60,7 +62,8 @@ def plot_trace(draws: dict[str, NDArray], labels: dict[str, str],
         h.hist(d.ravel(), bins=40, orientation="horizontal", color=_POST, alpha=0.8)
         _marks(a, n, truth, point, vertical=False)
         _marks(h, n, truth, point, vertical=False)
-        a.set_ylabel(labels.get(n, n), fontsize=9)
+        # rows are ~1.1 in tall: a long label (log10 sigma_noise (m) + 12) goes on two lines
+        a.set_ylabel(_wrap(labels.get(n, n), 15), fontsize=9)
         h.set_yticklabels([])
         h.set_ylim(a.get_ylim())
     axes[-1, 0].set_xlabel(f"draw (after burn-in and thinning), {draws[names[0]].shape[0]} "
@@ -81,7 +84,7 @@ def plot_rank(draws: dict[str, NDArray], labels: dict[str, str], n_bins: int | N
         n_bins = int(np.clip(draws[names[0]].shape[1] // 10, 4, 20))
     cols = min(3, len(names))
     rows = -(-len(names) // cols)
-    fig, axes = _grid(rows, cols, (2.3 * cols + 0.3, 1.25 * rows + 0.5))
+    fig, axes = _grid(rows, cols, (2.3 * cols + 0.3, 1.1 * rows + 0.5))
     for ax, n in zip(axes.ravel(), names, strict=False):
         d = draws[n]
         ranks = stats.rankdata(d.ravel()).reshape(d.shape)
@@ -134,7 +137,7 @@ def plot_pair(draws: dict[str, NDArray], labels: dict[str, str], truth: dict[str
                 _marks(ax, nj, truth, point)
                 _marks(ax, ni, truth, point, vertical=False)
             if i == k - 1:
-                ax.set_xlabel(labels.get(nj, nj), fontsize=8.5)
+                ax.set_xlabel(_wrap(labels.get(nj, nj), 16), fontsize=8.5)
             else:
                 ax.set_xticklabels([])
             if j == 0 and i > 0:
@@ -144,8 +147,30 @@ def plot_pair(draws: dict[str, NDArray], labels: dict[str, str], truth: dict[str
             ax.tick_params(labelsize=8.0)
             for lab in ax.get_xticklabels():
                 lab.set_rotation(35)
+    _fold_x_multiplier(fig, axes[-1])
     _legend_marks(fig, truth, "MAP")
     return fig
+
+
+def _wrap(label: str, width: int) -> str:
+    """A label on lines of at most ``width`` characters, a shift ("+ 12", "− 0.5") kept
+    with the word before it."""
+    for sign in ("+", "−", "-"):
+        label = label.replace(f" {sign} ", f"\u00a0{sign}\u00a0")
+    return textwrap.fill(label, width).replace("\u00a0", " ")
+
+
+def _fold_x_multiplier(fig: Figure, axes: NDArray) -> None:
+    """Put an x axis' scale multiplier ("1e-7") into its label: drawn at the axis' right
+    end it ran into the rotated tick labels and the label below them. An axis that also
+    has an additive offset keeps matplotlib's own offset text (the report shifts such
+    quantities itself: "k_By (θ) - 0.5")."""
+    fig.canvas.draw()
+    for ax in axes:
+        off = ax.xaxis.get_offset_text()
+        if ax.get_visible() and re.fullmatch(r"1e[−-]?\d+", off.get_text()):
+            off.set_visible(False)
+            ax.set_xlabel(f"{ax.get_xlabel()}\n(×{off.get_text()})")
 
 
 @styled
@@ -181,7 +206,8 @@ def plot_prior_posterior(draws: dict[str, NDArray], priors: dict[str, tuple[NDAr
                 ins.axvline(truth[n] - ref, color=_TRUE, lw=1.3)
             ins.set_yticks([])
             ins.tick_params(labelsize=7.5)
-            ins.set_title(f"zoom: θ − {ref:g}", fontsize=8.0)
+            ins.set_title(f"zoom: θ − {ref:g}", fontsize=8.0,     # over the truth line
+                          bbox={"facecolor": "white", "edgecolor": "none", "pad": 1.0})
             ins.xaxis.get_offset_text().set_fontsize(7.5)
         if n in truth:
             ax.axvline(truth[n], color=_TRUE, lw=1.5, label="true value")

@@ -95,8 +95,11 @@ def final_draws(run: RunData, n: int, seed: int) -> tuple[Any, str]:
         th = mean + np.array(sd) * rng.standard_normal((n, len(run.names)))
         return Draws(run.names, th), ("draws of the final model after the diagnosis "
                                       "(normal, from its parameters' mean and sd)")
+    lc = run.summary.get("laplace_cov") if isinstance(run.summary, dict) else None
     src = ("posterior draws of the identification (emcee)" if run.posterior is not None
-           else "draws of the Laplace approximation of summary.json (independent normals)")
+           else "draws of the Laplace approximation of summary.json ("
+           + ("normal, with its correlations)" if isinstance(lc, dict)
+              else "independent normals)"))
     return draws_from(run, n, seed), src
 
 
@@ -135,8 +138,12 @@ def engineering_section(run: RunData, opts: ReportOptions
                     iso14839_zone(10 ** (p.hi / 20)) if np.isfinite(p.hi) else "–"])
     paras = [
         f"Each number is a function of θ, evaluated at {res.draws.theta.shape[0]} "
-        f"{source}; the value is the median and the brackets the 90 % interval (5 % and "
-        "95 % quantiles). The plant is the full FE model with the identified parameters, "
+        f"{source}; the value is the median and the brackets the 90 % interval: the 5 % and "
+        "95 % quantiles, widened to the quantity's range over the posterior's central "
+        "region (within 1.645 standard deviations, Mahalanobis, of its mean), so that a "
+        "quantity with a maximum or minimum near the estimate (a mode frequency on a "
+        "ridge) is not cut short. The "
+        "plant is the full FE model with the identified parameters, "
         "sampled at the recording's dt and closed with the controller that ran. "
         "'Nominal' is the same calculation with θ = 0 (the plant as designed). "
         + SIGN_CONVENTION,

@@ -308,7 +308,9 @@ def discrepancy_figures(diag: dict[str, Any], residuals: Any,
         figs.append(render_figure(
             pdisc.plot_candidates(diag), "disc_candidates", "Evidence per candidate",
             "Bars: screening gain; diamonds: log Bayes factor of the candidates fitted "
-            "fully (values at or below 0.01 drawn at 0.01); dashed: acceptance threshold."))
+            "fully (values at or below 0.01 drawn at 0.01); dashed: acceptance threshold. "
+            f"Per round the candidates fitted fully and the best of the others, "
+            f"{pdisc.CANDIDATES_SHOWN} in all (every candidate: the table above)."))
     if diag.get("parameters_before"):
         figs.append(render_figure(
             pdisc.plot_parameters(diag, truth), "disc_params",

@@ -238,6 +238,22 @@ def _flags(run: RunData, truth: dict[str, float]) -> list[str]:
     return out
 
 
+def _unexplained(un: Any) -> str:
+    """One clause for diagnosis.json's "unexplained": a dict (present, channels, bands_hz,
+    ...) since the physics library, a plain string before it; "" when nothing is left."""
+    if isinstance(un, str):
+        return un.strip()
+    if not isinstance(un, dict) or not un.get("present"):
+        return ""
+    bands = un.get("bands_hz") or []
+    where = ", ".join(f"{g(lo)}–{g(hi)}" for lo, hi in bands[:4])
+    where = (f" in {where}" + (f" and {len(bands) - 4} more bands" if len(bands) > 4 else "")
+             + " Hz") if bands else ""
+    channels = ", ".join(un.get("channels") or []) or "?"
+    return (f"structure coherent with the excitation on channel(s) {channels}{where} that "
+            "no model in the library explains")
+
+
 def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
     """Leads with the final model: after the diagnosis when it named physics (with the
     identification's nominal fit as "before"), else the identification."""
@@ -272,9 +288,10 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
             bullets.append("Model discrepancy: " + ("a mismatch was located but no missing "
                            "physics named" if (dg.get("mismatch") or {}).get("detected")
                            else "no mismatch found") + " (see Model discrepancy).")
-    if dg.get("unexplained"):
-        bullets.append(f"The diagnosis leaves part of the mismatch unexplained: "
-                       f"{dg['unexplained']}.")
+    unexplained = _unexplained(dg.get("unexplained"))
+    if unexplained:
+        bullets.append("The diagnosis leaves part of the mismatch unexplained: "
+                       + unexplained + " (see Model discrepancy).")
     bullets += [("Before the diagnosis, " if named and after else "")
                 + f"{n}: the posterior presses against the prior bound {b:g}. The data would "
                 "move it further than the prior allows, often a sign that the model misses "

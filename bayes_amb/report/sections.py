@@ -354,7 +354,8 @@ def discrepancy_section(run: RunData) -> Section:
                              for e in dg["explanations"] for k, v in e["params"].items()],
                             "Effect names and units from the physics library "
                             "(`bayes-amb library`); the last column is the effect's "
-                            "equivalence class: explanations with the same u → y map."))
+                            "equivalence class: explanations with the same u → y map.",
+                            wrap=(0, 1, 4, 7)))
     fit = dg.get("fit", {})
     if fit:
         tables.append(Table("Fit before and after", [
@@ -378,17 +379,38 @@ def discrepancy_section(run: RunData) -> Section:
             "with the nominal model it often absorbs the missing physics."))
     cands = dg.get("candidates", [])
     if cands:
-        tables.append(Table("Every candidate tried", [
-            "round", "effect", "location", "screening gain (nats)", "log Bayes factor"],
-            [[str(c["round"]), c["effect"], c["location"], g(c["screen_gain"], 3),
-              g(c["log_bayes_factor"], 3)] for c in cands],
-            "Screening fits only the candidate's own parameters (its fingerprint against "
-            "the residual); the best are fitted fully and scored by Bayes factor."))
+        tables.append(_candidate_table(cands))
     paras = [str(dg.get("summary", ""))]
     if dg.get("criterion"):
         paras.append(f"Criterion: {dg['criterion']}. Inference: {dg.get('inference', '?')}.")
     return _section("discrepancy", paragraphs=paras, tables=tables,
                     figures=fg.discrepancy_figures(dg, run.diagnosis_residuals, truth))
+
+
+def _candidate_table(cands: list[dict[str, Any]]) -> Table:
+    """Every candidate tried, one row per effect and location (in the order of first
+    trial) and two columns per round: screening gain and log Bayes factor ("–": not
+    fitted fully; blank: not tried in that round, e.g. after it was accepted)."""
+    rounds = sorted({int(c["round"]) for c in cands})
+    keys: dict[tuple[str, str], dict[int, dict[str, Any]]] = {}
+    for c in cands:
+        keys.setdefault((c["effect"], c["location"]), {})[int(c["round"])] = c
+    header = ["effect", "location"]
+    for r in rounds:
+        header += [f"round {r}: gain (nats)", f"round {r}: log BF"]
+    rows = []
+    for (effect, loc), by_round in keys.items():
+        row = [effect, loc]
+        for r in rounds:
+            c = by_round.get(r)
+            row += ["", ""] if c is None else [g(c["screen_gain"], 3),
+                                               g(c["log_bayes_factor"], 3)]
+        rows.append(row)
+    return Table("Every candidate tried", header, rows,
+                 "Gain: the screening fit of the candidate's own parameters (its fingerprint "
+                 "against the residual), in nats; the best are fitted fully and scored by "
+                 "their log Bayes factor (–: not fitted fully). Blank: not tried in that "
+                 "round.")
 
 
 def _effect_title(name: str) -> str:
