@@ -21,7 +21,9 @@ from bayes_amb.cli.main import main
 KEYS = {
     "likelihood": {"likelihood_us", "baseline_us", "speedup", "n_params", "n_samples",
                    "batch", "repeats", "residual_rel_err", "numpy_path_us",
-                   "kernel_speedup", "kernel_rel_err"},
+                   "kernel_speedup", "kernel_rel_err", "previous_path_us",
+                   "previous_speedup", "previous_rel_err", "cpu_us",
+                   "cpu_previous_speedup", "target_us"},
     "posterior": {"posterior_s", "wall_s", "ess_per_s", "converged", "max_r_hat", "min_ess",
                   "n_tau", "likelihood_evals", "baseline_eval_us",
                   "baseline_posterior_s_estimated", "speedup_estimated", "parameters",
@@ -30,7 +32,7 @@ KEYS = {
                  "requirement_s", "max_rel_diff"},
     "map": {"lbfgs", "nelder_mead", "speedup", "eval_ratio"},
 }
-TIMES = {"likelihood": ("likelihood_us", "baseline_us", "numpy_path_us"),
+TIMES = {"likelihood": ("likelihood_us", "baseline_us", "numpy_path_us", "previous_path_us"),
          "posterior": ("posterior_s", "wall_s", "baseline_posterior_s_estimated"),
          "simulate": ("simulate_s", "baseline_s")}
 
@@ -61,6 +63,10 @@ def test_json_has_every_benchmark_and_key(bench_json):
 def test_sides_compute_the_same_thing(bench_json):
     # the time-domain forced_response residual and the fast DFT residual (rounding only)
     assert bench_json["likelihood"]["residual_rel_err"] < 1e-9
+    # the three likelihood paths give the same log posterior (issue 16's exactness)
+    assert bench_json["likelihood"]["kernel_rel_err"] < 1e-9
+    assert bench_json["likelihood"]["previous_rel_err"] < 1e-9
+    assert set(bench_json["likelihood"]["cpu_us"]) == {"numba", "lapack", "numpy"}
     # simulate_recording against forced_response on the explicit closed loop
     assert bench_json["simulate"]["max_rel_diff"] < 1e-9
     assert bench_json["simulate"]["n_states"] == 320

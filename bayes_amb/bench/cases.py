@@ -55,6 +55,7 @@ log = logging.getLogger(__name__)
 PARAMS_8 = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
 TRUE_8 = dict(zip(PARAMS_8, (0.1, -0.1, 0.2, 0.5, 0.3, -0.2, 0.1, 0.0), strict=True))
 CHECK_RTOL = 1e-9  # largest relative difference allowed between the two sides
+LIKELIHOOD_TARGET_US = 50.0   # issue 16: one evaluation, 8 parameters, 5000 x 4, batch 32
 
 
 def make_recording(truth: str, params: dict[str, float], dt: float, duration: float,
@@ -109,9 +110,10 @@ def bench_likelihood(quick: bool = False, batch: int = 32) -> LikelihoodBench:
     :func:`~bayes_amb.bench.baselines.naive_log_likelihood`, one vector per call. Before
     timing, the DFT of the forced_response residual at the truth (through the likelihood's
     prewhitening FIR) is checked against the fast path's residual DFT (relative difference
-    below CHECK_RTOL). The compiled kernel is also timed against the numpy path it replaced
-    (``BAYES_AMB_KERNEL=numpy``), interleaved call by call, and both must give the same log
-    posterior to CHECK_RTOL.
+    below CHECK_RTOL). The default path is also timed against the paths it replaced
+    (``BAYES_AMB_KERNEL=lapack``: LAPACK's modal form and the first compiled kernel;
+    ``numpy``: before any kernel), interleaved call by call in wall and CPU time, and all
+    must give the same log posterior to CHECK_RTOL.
 
     Parameters
     ----------
@@ -138,50 +140,69 @@ def bench_likelihood(quick: bool = False, batch: int = 32) -> LikelihoodBench:
                              f"forced_response residual by {err:.2e}; expected < {CHECK_RTOL}")
     points = _ball(theta, batch, np.random.default_rng(0))
     repeats = 3 if quick else 15
-    fast_us, numpy_us, kernel_err = _kernel_side_by_side(post, points, repeats)
+    paths = _kernel_side_by_side(post, points, repeats)
+    fast_us = paths["numba"]["wall_us"]
     base_us = naive_eval_us(fm, eps, points, 3 if quick else 9)
+    cpu = {k: v["cpu_us"] for k, v in paths.items()}
     return LikelihoodBench(likelihood_us=fast_us, baseline_us=base_us,
                            speedup=base_us / fast_us, n_params=len(PARAMS_8),
                            n_samples=rec.n_samples, batch=batch, repeats=repeats,
-                           residual_rel_err=err, numpy_path_us=numpy_us,
-                           kernel_speedup=numpy_us / fast_us, kernel_rel_err=kernel_err)
+                           residual_rel_err=err, numpy_path_us=paths["numpy"]["wall_us"],
+                           kernel_speedup=paths["numpy"]["wall_us"] / fast_us,
+                           kernel_rel_err=paths["numba"]["rel_err"],
+                           previous_path_us=paths["lapack"]["wall_us"],
+                           previous_speedup=paths["lapack"]["wall_us"] / fast_us,
+                           previous_rel_err=paths["lapack"]["rel_err"], cpu_us=cpu,
+                           cpu_previous_speedup=cpu["lapack"] / cpu["numba"],
+                           target_us=LIKELIHOOD_TARGET_US)
 
 
 def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
-                         ) -> tuple[float, float, float]:
-    """Per-evaluation time (us) of the posterior with the compiled kernel and with the numpy
-    path (BAYES_AMB_KERNEL=numpy, the path before issue 16), interleaved call by call after
-    a warm-up of each (the likelihood's remembered last batch is forgotten before every
-    call); and the largest relative difference of their log posteriors."""
+                         ) -> dict[str, dict[str, float]]:
+    """Per-evaluation time (us) of the posterior on each likelihood path, interleaved call by
+    call after a warm-up of each (the order rotates every round; the likelihood's remembered
+    last batch is forgotten before every call): ``numba`` (the default: everything compiled),
+    ``lapack`` (the path before it: the modal form by LAPACK's eig, then the first compiled
+    kernel) and ``numpy`` (the path before any kernel), see ``BAYES_AMB_KERNEL``. Per path:
+    the median wall time (``wall_us``) and CPU time (``cpu_us``, ``time.process_time``) of
+    one evaluation, and the largest relative difference of its log posteriors from the numpy
+    path's (``rel_err``; BenchmarkError above CHECK_RTOL)."""
     import os
 
-    from bayes_amb.inference.kernels import KERNEL_ENV
+    from bayes_amb.inference.kernels import KERNEL_ENV, KERNEL_MODES
 
     saved = os.environ.get(KERNEL_ENV)
-    times: dict[str, list[float]] = {"numba": [], "numpy": []}
+    wall: dict[str, list[float]] = {k: [] for k in KERNEL_MODES}
+    cpu: dict[str, list[float]] = {k: [] for k in KERNEL_MODES}
     values = {}
     try:
         for r in range(repeats + 1):
-            for kind in ("numba", "numpy") if r % 2 else ("numpy", "numba"):
+            shift = r % len(KERNEL_MODES)
+            for kind in KERNEL_MODES[shift:] + KERNEL_MODES[:shift]:
                 os.environ[KERNEL_ENV] = kind
                 post.likelihood._last_sums = None    # no remembered batch: a real evaluation
-                t0 = time.perf_counter()
+                c0, t0 = time.process_time(), time.perf_counter()
                 values[kind] = post(points)
+                t1, c1 = time.perf_counter(), time.process_time()
                 if r:
-                    times[kind].append(time.perf_counter() - t0)
+                    wall[kind].append(t1 - t0)
+                    cpu[kind].append(c1 - c0)
     finally:
         if saved is None:
             os.environ.pop(KERNEL_ENV, None)
         else:
             os.environ[KERNEL_ENV] = saved
-    rel = float(np.max(np.abs(values["numba"] - values["numpy"]) / np.abs(values["numpy"])))
-    if not rel < CHECK_RTOL:
-        raise BenchmarkError(f"likelihood benchmark: the compiled kernel's log posterior "
-                             f"differs from the numpy path's by {rel:.2e}; expected < "
-                             f"{CHECK_RTOL}")
     n = points.shape[0]
-    return (1e6 * float(np.median(times["numba"])) / n,
-            1e6 * float(np.median(times["numpy"])) / n, rel)
+    out = {}
+    for kind in KERNEL_MODES:
+        rel = float(np.max(np.abs(values[kind] - values["numpy"]) / np.abs(values["numpy"])))
+        if not rel < CHECK_RTOL:
+            raise BenchmarkError(f"likelihood benchmark: the {kind} path's log posterior "
+                                 f"differs from the numpy path's by {rel:.2e}; expected < "
+                                 f"{CHECK_RTOL}")
+        out[kind] = {"wall_us": 1e6 * float(np.median(wall[kind])) / n,
+                     "cpu_us": 1e6 * float(np.median(cpu[kind])) / n, "rel_err": rel}
+    return out
 
 
 POSTERIOR_TARGET_S = 15.0   # issue 16: the 8-parameter converged posterior, whole call

@@ -47,7 +47,23 @@ class LikelihoodBench(Result):
     kernel_speedup : float
         numpy_path_us / likelihood_us.
     kernel_rel_err : float
-        Largest relative difference between the two paths' log posteriors.
+        Largest relative difference between the default path's log posteriors and the numpy
+        path's.
+    previous_path_us : float
+        The same evaluation on the path before the compiled modal form
+        (``BAYES_AMB_KERNEL=lapack``: ``np.linalg.eig``, numpy ZOH and modal state, the first
+        compiled band-sum kernel), timed interleaved with the others.
+    previous_speedup : float
+        previous_path_us / likelihood_us.
+    previous_rel_err : float
+        Largest relative difference between its log posteriors and the numpy path's.
+    cpu_us : dict
+        Median CPU time (``time.process_time``) of one evaluation per path: "numba" (the
+        default), "lapack", "numpy"; the comparable figure on a shared machine.
+    cpu_previous_speedup : float
+        cpu_us["lapack"] / cpu_us["numba"].
+    target_us : float
+        The issue-16 target for likelihood_us.
     """
 
     likelihood_us: float
@@ -61,6 +77,12 @@ class LikelihoodBench(Result):
     numpy_path_us: float
     kernel_speedup: float
     kernel_rel_err: float
+    previous_path_us: float
+    previous_speedup: float
+    previous_rel_err: float
+    cpu_us: dict[str, float]
+    cpu_previous_speedup: float
+    target_us: float
 
 
 @dataclass(frozen=True)

@@ -92,12 +92,18 @@ def _details(d: dict[str, Any]) -> list[str]:
     out = []
     if "likelihood" in d:
         r = d["likelihood"]
+        cpu = r["cpu_us"]
         out.append(f"likelihood: {r['n_params']} parameters, {r['n_samples']} samples x 4, "
                    f"batch {r['batch']}; baseline forced_response + iid Gaussian; residual "
-                   f"DFT check {r['residual_rel_err']:.1e}; numpy path (BAYES_AMB_KERNEL="
-                   f"numpy) {_us(r['numpy_path_us'])}/eval, the compiled kernel "
-                   f"{r['kernel_speedup']:.2f}x faster (log posterior check "
-                   f"{r['kernel_rel_err']:.1e})")
+                   f"DFT check {r['residual_rel_err']:.1e}; target {r['target_us']:g} us")
+        out.append(f"  side by side, per evaluation, wall (CPU): compiled modal form (default)"
+                   f" {r['likelihood_us']:.1f} us ({cpu['numba']:.1f}); previous path "
+                   f"(BAYES_AMB_KERNEL=lapack) {r['previous_path_us']:.1f} us "
+                   f"({cpu['lapack']:.1f}) = {r['previous_speedup']:.2f}x "
+                   f"({r['cpu_previous_speedup']:.2f}x CPU); numpy path (BAYES_AMB_KERNEL="
+                   f"numpy) {r['numpy_path_us']:.1f} us ({cpu['numpy']:.1f}) = "
+                   f"{r['kernel_speedup']:.2f}x; log posterior checks against the numpy path "
+                   f"{r['kernel_rel_err']:.1e} and {r['previous_rel_err']:.1e}")
     if "posterior" in d:
         r = d["posterior"]
         out.append(f"posterior: {r['n_params']} parameters, {r['n_samples']} samples, "

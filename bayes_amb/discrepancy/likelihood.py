@@ -52,7 +52,7 @@ from scipy.special import gammaln
 
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference import kernels
-from bayes_amb.inference.forward import ModalBatch, dft_response, final_modal_state
+from bayes_amb.inference.forward import ModalBatch, dft_response, state_after
 from bayes_amb.inference.whittle import WhittleLikelihood
 
 P_CH = 4
@@ -109,7 +109,7 @@ class RobustWhittle(WhittleLikelihood):
         mb, xi = self.forward.modal(theta, self.x_w)
         if self.start:
             lam_s = np.where(mb.stable[:, None], mb.lam, 0.0)
-            xi = xi - final_modal_state(lam_s, mb.Bm, self.x_pre)
+            xi = xi - state_after(lam_s, mb.Bm, self.x_pre)
         return mb, xi
 
     def prediction_dft(self, P: NDArray) -> tuple[NDArray, NDArray]:

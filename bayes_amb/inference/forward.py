@@ -21,8 +21,15 @@ from numpy.typing import NDArray
 from bayes_amb.control.design import design_observer_controller
 from bayes_amb.control.discrete import zoh
 from bayes_amb.errors import RecordingError
-from bayes_amb.inference.batched import zoh_batched
-from bayes_amb.inference.loop_model import LoopParts, error_form_matrices, loop_matrices
+from bayes_amb.inference import kernels
+from bayes_amb.inference.batched import zoh_batched, zoh_compiled
+from bayes_amb.inference.eigen import final_state, modal_batch
+from bayes_amb.inference.loop_model import (
+    LoopParts,
+    error_form_compiled,
+    error_form_matrices,
+    loop_matrices,
+)
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rotor import full_model
@@ -46,7 +53,59 @@ def diagonalise(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None = None
     """Eigen-decompose a stack of systems; unstable or non-finite members are flagged.
 
     With an input record x, also returns the modal state after its last sample (nb, ns).
+    The default path is compiled (bayes_amb.inference.eigen; members it cannot take go to
+    ``np.linalg.eig``); with ``BAYES_AMB_KERNEL`` "lapack" or "numpy" every member goes to
+    ``np.linalg.eig`` and the modal state to :func:`final_modal_state`.
     """
+    finite = np.all(np.isfinite(A), axis=(1, 2))
+    if kernels.compiled_modal():
+        lam, Bm, Cm, ok = modal_batch(A, B, C)
+        redo = np.flatnonzero(finite & ~ok)
+        if redo.size:
+            Bb = np.broadcast_to(B, (A.shape[0], *B.shape[-2:]))
+            Cb = np.broadcast_to(C, (A.shape[0], *C.shape[-2:]))
+            mb, _ = _diagonalise_lapack(A[redo], Bb[redo], Cb[redo], None)
+            lam[redo], Bm[redo], Cm[redo] = _real_symmetric(mb.lam, mb.Bm, mb.Cm)
+        stable = finite & (np.max(np.abs(lam), axis=1) < 1.0 - 1e-12)
+        mb = ModalBatch(lam=lam, Bm=Bm, Cm=Cm, stable=stable)
+        if x is None:
+            return mb, None
+        lam_s = np.where(stable[:, None], lam, 0.0)
+        return mb, final_state(lam_s, Bm, x, _TRANSIENT_TOL)
+    return _diagonalise_lapack(A, B, C, x)
+
+
+def state_after(lam: NDArray, Bm: NDArray, x: NDArray) -> NDArray:
+    """Modal state after the record x from rest, (nb, ns): the compiled
+    :func:`bayes_amb.inference.eigen.final_state` (each eigenvalue's own number of terms),
+    or :func:`final_modal_state` with ``BAYES_AMB_KERNEL`` "lapack" or "numpy"."""
+    if kernels.compiled_modal():
+        return final_state(lam, Bm, x, _TRANSIENT_TOL)
+    return final_modal_state(lam, Bm, x)
+
+
+def _real_symmetric(lam: NDArray, Bm: NDArray, Cm: NDArray
+                    ) -> tuple[NDArray, NDArray, NDArray]:
+    """LAPACK's modal form of real systems with the symmetry exact, as the compiled one has
+    it: the second mode of each adjacent conjugate pair takes the conjugates of the first's
+    Bm and Cm, and real modes real Bm and Cm (both equal to rounding already)."""
+    Bm, Cm = Bm.copy(), Cm.copy()
+    pair = np.zeros(lam.shape, dtype=bool)
+    pair[:, 1:] = (lam[:, 1:] == np.conj(lam[:, :-1])) & (lam[:, 1:].imag != 0)
+    for s in range(1, lam.shape[1]):            # a pair, not a chain
+        pair[:, s] &= ~pair[:, s - 1]
+    b, s = np.nonzero(pair)
+    Bm[b, s] = np.conj(Bm[b, s - 1])
+    Cm[b, :, s] = np.conj(Cm[b, :, s - 1])
+    real = lam.imag == 0
+    Bm[real] = Bm[real].real
+    b, s = np.nonzero(real)
+    Cm[b, :, s] = Cm[b, :, s].real
+    return lam, Bm, Cm
+
+
+def _diagonalise_lapack(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None
+                        ) -> tuple[ModalBatch, NDArray | None]:
     finite = np.all(np.isfinite(A), axis=(1, 2))
     A = np.where(finite[:, None, None], A, 0.0)
     lam, V = np.linalg.eig(A)
@@ -98,6 +157,10 @@ class ForwardModel:
             if same and self.port == "eta":
                 self.fast = True
                 self.F, self.L = F, L
+                # theta-independent parts of the compiled error form (contiguous float64)
+                self._error_parts = tuple(np.ascontiguousarray(a, dtype=float)
+                                          for a in (Ad, Bd, self.reduced.C, F, L))
+                self._LC = np.ascontiguousarray(L @ self.reduced.C, dtype=float)
         else:
             L = design_observer_controller(self.reduced, dt).L
             self.parts = LoopParts(ctrl.A, ctrl.B, ctrl.C, ctrl.D, Ad, Bd, self.reduced.C, L,
@@ -116,6 +179,9 @@ class ForwardModel:
         th = np.atleast_2d(np.asarray(theta, dtype=float))
         pl = self.plant
         diag = np.repeat(th, pl.blocks, axis=1)                      # (nb, r)
+        if kernels.compiled_modal():
+            return zoh_compiled(pl.A[None] + (pl.B_w * diag[:, None, :]) @ pl.C_z, pl.B,
+                                self.dt)
         A = pl.A[None] + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
         return zoh_batched(A, pl.B, self.dt)
 
@@ -123,8 +189,11 @@ class ForwardModel:
         """(A, B, C) of the map x -> eps for a batch of theta."""
         Ap, Bp = self.plants(theta)
         if self.fast:
-            Ad, Bd, C = self.nominal
-            A_S, B_S, C_S = error_form_matrices(Ad, Bd, C, self.F, self.L, Ap, Bp)
+            if kernels.compiled_modal():
+                A_S, B_S, C_S = error_form_compiled(*self._error_parts, Ap, Bp, self._LC)
+            else:
+                Ad, Bd, C = self.nominal
+                A_S, B_S, C_S = error_form_matrices(Ad, Bd, C, self.F, self.L, Ap, Bp)
             return A_S, B_S, np.broadcast_to(C_S, (Ap.shape[0], *C_S.shape))
         A_cl, B_cl, C_cl, _ = loop_matrices(self.parts, Ap, Bp, self.plant.C)
         return A_cl, B_cl[:, :, :4], C_cl

@@ -18,7 +18,8 @@ differs, so the two agree to a few units of rounding per term: tests/test_kernel
 
 Compiled on first use and cached on disk (numba ``cache=True``); single-threaded (the
 parallelism is the batch over walkers and the tool's own worker pools). Set
-``BAYES_AMB_KERNEL=numpy`` to use the numpy path instead (for comparison).
+``BAYES_AMB_KERNEL=numpy`` to use the numpy path instead, ``lapack`` for the first compiled
+path (both for comparison; KERNEL_MODES).
 """
 
 from __future__ import annotations
@@ -33,14 +34,34 @@ from numpy.typing import NDArray
 KERNEL_ENV = "BAYES_AMB_KERNEL"
 
 
-def use_compiled() -> bool:
-    """Whether the likelihood uses these kernels (``BAYES_AMB_KERNEL`` unset or "numba")."""
+KERNEL_MODES = ("numba", "lapack", "numpy")
+"""Values of ``BAYES_AMB_KERNEL``: ``numba`` (the default) computes everything compiled,
+the modal form included (bayes_amb.inference.eigen); ``lapack`` is the compiled path
+before that (modal form by ``np.linalg.eig``, numpy ZOH and modal state, the walker-by-walker
+band sums of this module): kept to be measured side by side; ``numpy`` is the path before
+any kernel."""
+
+
+def kernel_mode() -> str:
+    """The likelihood path in force: ``BAYES_AMB_KERNEL`` (one of KERNEL_MODES), default
+    "numba"."""
     value = os.environ.get(KERNEL_ENV, "numba").strip().lower() or "numba"
-    if value not in ("numba", "numpy"):
+    if value not in KERNEL_MODES:
         from bayes_amb.errors import BayesAmbError
 
-        raise BayesAmbError(f"{KERNEL_ENV}: expected 'numba' or 'numpy', got {value!r}")
-    return value == "numba"
+        raise BayesAmbError(f"{KERNEL_ENV}: expected one of {', '.join(KERNEL_MODES)}, "
+                            f"got {value!r}")
+    return value
+
+
+def use_compiled() -> bool:
+    """Whether the likelihood uses these kernels (``BAYES_AMB_KERNEL`` "numba" or "lapack")."""
+    return kernel_mode() != "numpy"
+
+
+def compiled_modal() -> bool:
+    """Whether the modal form, ZOH and band algebra are compiled too (the default "numba")."""
+    return kernel_mode() == "numba"
 
 
 CHUNK_BINS = 512

@@ -22,6 +22,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 
 PORTS = ("eta", "r2", "r1")
@@ -107,3 +108,40 @@ def error_form_matrices(A: NDArray, B: NDArray, C: NDArray, F: NDArray, L: NDArr
     B_S = np.concatenate([dB, Bp], axis=1)
     C_S = np.hstack([C, np.zeros_like(C)])
     return A_S, B_S, C_S
+
+
+@njit(cache=True, nogil=True)
+def _error_form(A, B, F, LC, Ap, Bp, A_S, B_S):  # pragma: no cover - compiled
+    nb, n, _ = Ap.shape
+    m = B.shape[1]
+    dB = np.empty((n, m))
+    for b in range(nb):
+        for i in range(n):
+            for c in range(m):
+                dB[i, c] = Bp[b, i, c] - B[i, c]
+                B_S[b, i, c] = dB[i, c]
+                B_S[b, n + i, c] = Bp[b, i, c]
+            for j in range(n):
+                s = 0.0                     # dB F and Bp F
+                t = 0.0
+                for c in range(m):
+                    s += dB[i, c] * F[c, j]
+                    t += Bp[b, i, c] * F[c, j]
+                A_S[b, i, j] = A[i, j] + LC[i, j] - s
+                A_S[b, i, n + j] = (Ap[b, i, j] - A[i, j]) + s
+                A_S[b, n + i, j] = -t
+                A_S[b, n + i, n + j] = Ap[b, i, j] + t
+
+
+def error_form_compiled(A: NDArray, B: NDArray, C: NDArray, F: NDArray, L: NDArray,
+                        Ap: NDArray, Bp: NDArray, LC: NDArray | None = None
+                        ) -> tuple[NDArray, NDArray, NDArray]:
+    """:func:`error_form_matrices` in one compiled pass over the batch (the same blocks;
+    LC = L @ C may be passed precomputed)."""
+    nb, n, _ = Ap.shape
+    A_S = np.empty((nb, 2 * n, 2 * n))
+    B_S = np.empty((nb, 2 * n, B.shape[1]))
+    LC = L @ C if LC is None else LC
+    _error_form(A, B, F, LC, np.ascontiguousarray(Ap, np.float64),
+                np.ascontiguousarray(Bp, np.float64), A_S, B_S)
+    return A_S, B_S, np.hstack([C, np.zeros_like(C)])

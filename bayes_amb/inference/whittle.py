@@ -49,7 +49,7 @@ from scipy.signal import lfilter, welch
 
 from bayes_amb.control.discrete import ss_freqresp, ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference import kernels
+from bayes_amb.inference import kernels, walker_kernels
 from bayes_amb.inference.forward import ForwardModel, ModalBatch, dft_response
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
@@ -306,10 +306,11 @@ class WhittleLikelihood:
         memo = getattr(self, "_row_sums", None)
         if memo is not None:
             return self._band_sums_by_row(theta, memo)
-        uniq, inverse = np.unique(theta, axis=0, return_inverse=True)
-        if uniq.shape[0] < theta.shape[0]:
-            Pb, stable = self._compute_band_sums(uniq)
-            inverse = inverse.reshape(-1)
+        rows: dict[bytes, int] = {}
+        inverse = np.array([rows.setdefault(r.tobytes(), len(rows)) for r in theta])
+        if len(rows) < theta.shape[0]:
+            first = np.unique(inverse, return_index=True)[1]
+            Pb, stable = self._compute_band_sums(theta[first])
             Pb, stable = Pb[inverse], stable[inverse]
         else:
             Pb, stable = self._compute_band_sums(theta)
@@ -351,8 +352,11 @@ class WhittleLikelihood:
             return self._band_sums(R), stable
         mb, xi = self.modal_state(theta)
         lines, coef = self._line_terms(theta)
-        Pb = kernels.residual_band_sums(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
-                                        self.scale, self.starts, self.counts, lines, coef)
+        kernel = kernels.residual_band_sums
+        if kernels.compiled_modal() and theta.shape[0] >= walker_kernels.LANES_MIN_BATCH:
+            kernel = walker_kernels.residual_band_sums_lanes
+        Pb = kernel(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E, self.scale, self.starts,
+                    self.counts, lines, coef)
         return Pb, mb.stable
 
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
@@ -362,11 +366,14 @@ class WhittleLikelihood:
         Pb, stable = self.band_sums(theta)                          # (nb, nbands, 4, 4)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
-        Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
-        if kernels.use_compiled():
-            logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
+        if kernels.compiled_modal():
+            logdet, quad, ok = walker_kernels.whittle_terms(sig2, ps, self.n, Pb)
         else:
-            logdet, quad, ok = _logdet_and_trace(Phi, Pb)
+            Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
+            if kernels.use_compiled():
+                logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
+            else:
+                logdet, quad, ok = _logdet_and_trace(Phi, Pb)
         ll = -(self.counts * (logdet + 4 * np.log(np.pi)) + quad)
         bad = ~stable | ~np.all(ok, axis=1) | ~np.all(np.isfinite(ll), axis=1)
         ll[bad] = -np.inf
