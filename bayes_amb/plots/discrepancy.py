@@ -99,7 +99,7 @@ def plot_candidates(report: dict[str, Any], shown: int = CANDIDATES_SHOWN) -> Fi
     """Evidence per candidate and round: screening gain and log Bayes factor (fitted ones),
     with the acceptance threshold; per round the candidates fitted fully and the best of
     the others by screening gain, ``shown`` in all, best first."""
-    rows = report["candidates"]
+    rows = [r for r in report["candidates"] if r["round"] != "revisit"]
     rounds = sorted({r["round"] for r in rows})
     ncol = min(2, len(rounds))
     nrow = -(-len(rounds) // ncol)

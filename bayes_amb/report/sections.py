@@ -378,8 +378,19 @@ def discrepancy_section(run: RunData) -> Section:
             "A MAP on a prior bound means the data pushed the parameter against its range: "
             "with the nominal model it often absorbs the missing physics."))
     cands = dg.get("candidates", [])
-    if cands:
-        tables.append(_candidate_table(cands))
+    greedy = [c for c in cands if c["round"] != "revisit"]
+    if greedy:
+        tables.append(_candidate_table(greedy))
+    revisited = [c for c in cands if c["round"] == "revisit"]
+    if revisited:
+        tables.append(Table("Earlier choices revisited", [
+            "choice", "alternative", "log BF of the choice", "log BF of the alternative"],
+            [[c["instead_of"], f"{c['effect']}@{c['location']}",
+              g(c.get("chosen_log_bayes_factor"), 5), g(c["log_bayes_factor"], 5)]
+             for c in revisited],
+            "Each earlier choice and the other candidates its round fitted fully, refitted "
+            "with the later effects held in the model; a larger log Bayes factor replaces "
+            "the choice."))
     paras = [str(dg.get("summary", ""))]
     if dg.get("criterion"):
         paras.append(f"Criterion: {dg['criterion']}. Inference: {dg.get('inference', '?')}.")
