@@ -380,10 +380,13 @@ def discrepancy_section(run: RunData) -> Section:
     if cands:
         tables.append(Table("Every candidate tried", [
             "round", "effect", "location", "screening gain (nats)", "log Bayes factor"],
-            [[str(c["round"]), c["effect"], c["location"], g(c["screen_gain"], 3),
+            [[str(c["round"]), c["effect"], c["location"], g(c["screen_gain"], 3)
+              + (" (predicted)" if c.get("screen") in ("pruned", "outranked") else ""),
               g(c["log_bayes_factor"], 3)] for c in cands],
             "Screening fits only the candidate's own parameters (its fingerprint against "
-            "the residual); the best are fitted fully and scored by Bayes factor."))
+            "the residual); the best are fitted fully and scored by Bayes factor. "
+            "'predicted': the linearised screen put the candidate well below the bar or "
+            "below the best of the round, and it was not fitted."))
     paras = [str(dg.get("summary", ""))]
     if dg.get("criterion"):
         paras.append(f"Criterion: {dg['criterion']}. Inference: {dg.get('inference', '?')}.")
