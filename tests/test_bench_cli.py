@@ -147,5 +147,7 @@ def test_diagnose_benchmark_names_the_hidden_lag():
     d = doc["diagnose"]
     assert "actuator_lag" in d["effects"] and d["n_samples"] == 5000
     assert math.isfinite(d["cpu_s"]) and d["cpu_s"] > 0 and d["target_median_s"] == 20
+    assert d["full_screen_cpu_s"] > 0 and d["speedup"] == pytest.approx(
+        d["full_screen_cpu_s"] / d["cpu_s"])
     text = format_text(doc)
-    assert "diagnose" in text and "actuator_lag" in text
+    assert "diagnose" in text and "actuator_lag" in text and "full screens" in text

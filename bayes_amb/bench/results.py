@@ -241,8 +241,9 @@ class MapBench(Result):
 @dataclass(frozen=True)
 class DiagnoseBench(Result):
     """One diagnosis with default options (bayes_amb.bench.diagnose_case): CPU and wall
-    time (s), the issue's target for the median CPU time, the record (s, samples), and what
-    it found (effects named, verdict)."""
+    time (s), the issue's target for the median CPU time, the record (s, samples), what it
+    found (effects named, verdict), and side by side the CPU time of the same diagnosis
+    with every candidate screened fully (no pre-screening) and the ratio."""
 
     cpu_s: float
     wall_s: float
@@ -251,6 +252,8 @@ class DiagnoseBench(Result):
     n_samples: int
     effects: tuple[str, ...]
     verdict: str
+    full_screen_cpu_s: float
+    speedup: float
 
 
 def environment() -> dict[str, Any]:

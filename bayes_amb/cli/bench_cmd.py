@@ -75,7 +75,8 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
     if "diagnose" in d:
         r = d["diagnose"]
         rows.append(("diagnose", f"{r['cpu_s']:.1f} s CPU ({r['wall_s']:.1f} s wall)",
-                     f"target median {r['target_median_s']:g} s", "-"))
+                     f"{r['full_screen_cpu_s']:.1f} s CPU, full screens",
+                     f"{r['speedup']:.1f}x"))
     if "cli" in d:
         r = d["cli"]
         rows.append(("cli", f"{r['default_s']:.1f} s without the variable",
@@ -143,7 +144,10 @@ def _details(d: dict[str, Any]) -> list[str]:
         r = d["diagnose"]
         out.append(f"diagnose: {r['duration_s']:g} s at 10 kHz ({r['n_samples']} samples), "
                    f"hidden 2.5 kHz lag, default options (eight coefficients); verdict "
-                   f"{r['verdict']!r}, named {', '.join(r['effects']) or 'nothing'}")
+                   f"{r['verdict']!r}, named {', '.join(r['effects']) or 'nothing'}; "
+                   f"baseline: the same diagnosis with every candidate screened fully (no "
+                   f"pre-screening), same verdict and names; target median "
+                   f"{r['target_median_s']:g} s CPU over the foreign benchmark")
     if "cli" in d:
         r = d["cli"]
         out.append(f"cli: `{r['command']}`, {r['repeats']} runs per environment, interleaved;"

@@ -74,12 +74,15 @@ from bayes_amb.uncertainty import parse_param_list
 @dataclass
 class DiagnoseOptions:
     """log_bf_threshold and max_effects of the greedy search, the candidates tried (default
-    all), sample (run emcee on the nominal and the final model; otherwise their posteriors
-    are Laplace approximations), steps per sampled model, seed, progress callback(text)."""
+    all), prescreen (route candidates by their fingerprint, prescreen.py; False screens
+    every one fully), sample (run emcee on the nominal and the final model; otherwise their
+    posteriors are Laplace approximations), steps per sampled model, seed, progress
+    callback(text)."""
 
     log_bf_threshold: float = 3.0
     max_effects: int = 4
     candidates: tuple[Candidate, ...] = field(default_factory=all_candidates)
+    prescreen: bool = True
     sample: bool = False
     steps: int = 2000
     seed: int = 0
@@ -259,7 +262,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     pool = (*left_out_coefficients(names), *opt.candidates)
     sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
                             max_effects=0 if checks.failed else opt.max_effects,
-                            candidates=pool)
+                            candidates=pool, prescreen=opt.prescreen)
     sel = revisit(select(nominal, sel_opt, priors, progress=say), priors, progress=say)
     if sel.accepted:
         say("refitting the chosen model with its own noise filters")

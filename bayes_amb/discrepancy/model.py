@@ -252,6 +252,8 @@ class ExtendedForwardModel(ForwardModel):
         cm = C_cl @ V                                                  # (4, ns)
         Ac = A[0]
         Adc = expm_batched(A[:1] * self.dt)[0]
+        zt = z0 ** t
+        modal_sums: dict[str, NDArray] = {}       # the same for every line of one start
         for c in self.line_candidates:
             Bf = c.line_force(self.ctx)
             if Bf is not None:
@@ -272,10 +274,38 @@ class ExtendedForwardModel(ForwardModel):
             # response from rest to s[k] = F z0^k:  sum_i c_i b_i (lam_i^k - z0^k)/(lam_i - z0)
             # plus the direct term; in steady state (line since long before the record) the
             # lam^k term is absent
-            lk = (lam[None, :] ** t[:, None] if c.start == "rest"
-                  else np.zeros((t.size, lam.size)))
-            g = (lk - (z0 ** t)[:, None]) / (lam - z0)[None, :]
+            if c.start not in modal_sums:
+                modal_sums[c.start] = ((powers(lam, t) if c.start == "rest" else 0.0)
+                                       - zt[:, None]) / (lam - z0)[None, :]
+            g = modal_sums[c.start]
             resp = (g * (bm @ F)[None, :]) @ cm.T                      # (N, 4) complex
-            resp = resp + (z0 ** t)[:, None] * (Dcl @ F)[None, :]
+            resp = resp + zt[:, None] * (Dcl @ F)[None, :]
             out.append(np.stack([resp.real, -resp.imag], axis=2))   # Re((a + jb) resp)
         return out
+
+
+def powers(lam: NDArray, t: NDArray, block: int = 128) -> NDArray:
+    """lam_i ** t_k (len(t), len(lam)) for integer t >= 0, as lam^(t mod block) times
+    (lam^block)^(t div block) from two short tables of running products (one complex
+    multiplication per entry instead of a complex power: ~10x cheaper; relative difference
+    from the power below 1e-12 at t = 2e4).
+
+    Examples
+    --------
+    >>> lam = np.array([0.9 * np.exp(0.3j), 0.0, 1.0, -0.5])
+    >>> t = np.arange(700)
+    >>> bool(np.allclose(powers(lam, t), lam[None, :] ** t[:, None], rtol=1e-12, atol=0))
+    True
+    """
+    t = np.asarray(t)
+    lam = np.asarray(lam, dtype=complex)
+
+    def table(base: NDArray, n: int) -> NDArray:
+        tab = np.ones((n, base.size), dtype=complex)
+        for k in range(1, n):
+            tab[k] = tab[k - 1] * base
+        return tab
+
+    low = table(lam, block)
+    high = table(low[-1] * lam, int(t.max(initial=0)) // block + 1)
+    return high[t // block] * low[t % block]

@@ -23,6 +23,19 @@ residual; it ranks the candidates. The best few are then fitted fully (all param
 scored by their Bayes factor; the best above the threshold is accepted and the search is
 repeated on top of it (greedy forward selection), so that two hidden effects yield both.
 
+Pre-screening (prescreen.py). Before the grid, each candidate's fingerprint is tested
+against the residual: the model linearised in its own parameters at its null (the score
+test, q + 1 kernel rows), maximised over its prior box. A line's linear screen is its
+screen (the residual is affine in its coefficients). A candidate that nests the current
+model and whose parameters all act at the null is not fitted when that prediction is well
+below screen_min, or so far below the round's n_refine best screens that it cannot be
+refined; everything else is screened in full, as before. The refits, and so what is
+accepted, are those of a full screen of every candidate wherever the linearisation stays
+inside the margins of prescreen.py (checked in tests/test_prescreen.py and on the foreign
+benchmark, benchmarks/README.md); pruned candidates are reported with their prediction. A line
+is refitted from both starts of the record, and only the better MAP gets a Hessian when
+the two are apart by more than their Occam factors can differ (refine_line).
+
 Multiplicity. A round tries K candidates, and the best of K null Bayes factors is larger
 than one of them: on effect-free foreign recordings with the 31-candidate library, one in
 ten named a 0.5 % actuator gain at log BF 3.1. The prior is made explicit instead: the
@@ -31,7 +44,10 @@ candidates of the group tried, so each has prior odds 1/K against the model with
 and a candidate is accepted when its log *posterior* odds, log BF - log K, exceed the
 threshold (with K = 31, a log BF above 6.4). This is the usual Bayesian adjustment for
 multiplicity (Scott & Berger 2010): adding candidates to the library raises the bar for
-each of them, so a wider library does not mean more false alarms.
+each of them, so a wider library does not mean more false alarms. K counts every candidate
+of the group, pre-screened away or not: the prior is spread over all the hypotheses of the
+library before the data are seen, and the pre-screen is a test on the same data, so
+counting only its survivors would spend the data twice and lower the bar unfairly.
 """
 
 from __future__ import annotations
@@ -51,6 +67,7 @@ from bayes_amb.discrepancy.gauss_newton import gauss_newton, least_squares_start
 from bayes_amb.discrepancy.library.registry import admissible
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
+from bayes_amb.discrepancy.prescreen import PRUNE_MARGIN, linear_screen
 from bayes_amb.inference.estimate import (
     LogPosterior,
     _initial_point,
@@ -69,13 +86,17 @@ class SelectOptions:
     log of the number of candidates tried in the round) exceed it (3: "strong" on the
     Kass-Raftery scale, 2 ln BF > 6); max_effects: greedy rounds; n_refine: how many
     screened candidates per round are fitted fully; screen_min: the screening gain (nats)
-    below which a candidate is not refined."""
+    below which a candidate is not refined; prescreen: route each candidate by its linear
+    screen (prescreen.py) instead of screening every one fully; prescreen_margin: nats
+    below screen_min under which the linear screen prunes a candidate."""
 
     log_bf_threshold: float = 3.0
     max_effects: int = 4
     n_refine: int = 3
     screen_min: float = 2.0
     candidates: tuple[Candidate, ...] = field(default_factory=all_candidates)
+    prescreen: bool = True
+    prescreen_margin: float = PRUNE_MARGIN
 
 
 @dataclass
@@ -128,14 +149,17 @@ def build(recording: Recording, params: tuple[str, ...], eps: NDArray,
     return fwd, like, LogPosterior(like, fwd.priors)
 
 
-def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None
+def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None,
+           phi: dict[str, float] | None = None
            ) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
     """Parent + candidate, sharing the parent's recording data and noise filters (models
-    compared with each other share one noise-spectrum family)."""
+    compared with each other share one noise-spectrum family), with the line bases at the
+    parent's MAP and the candidate at ``phi`` (default its null): the point its screen or
+    refit starts from (see _embed)."""
     pf = parent.forward
     fwd = ExtendedForwardModel(pf.recording, pf.theta_names, (*parent.candidates, cand),
                                priors, template=pf)
-    like = parent.like.for_model(fwd, fwd.null)
+    like = parent.like.for_model(fwd, _embed(parent, fwd, phi)[:len(fwd.params)])
     return fwd, like, LogPosterior(like, fwd.priors)
 
 
@@ -219,20 +243,34 @@ def _grid(prior: Prior, n: int) -> NDArray:
 
 @dataclass
 class Screen:
-    """A candidate's screening: the gain in log posterior of fitting only its parameters."""
+    """A candidate's screening: the gain in log posterior of fitting only its parameters.
+
+    how: 'full' (grid and Gauss-Newton, :func:`screen`), 'exact' (the linear screen of a
+    candidate the residual is affine in: the same optimum), 'pruned' or 'outranked' (the
+    linear screen's prediction, below the bar or below the round's best: not fitted); see
+    prescreen.py. linear_gain: the linear screen's prediction (None where it was not run).
+    """
 
     candidate: Candidate
     gain: float
     phi: dict[str, float]
+    how: str = "full"
+    linear_gain: float | None = None
 
 
-def screen(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None
+def _own_columns(fwd: ExtendedForwardModel) -> NDArray:
+    """Indices of the last candidate's parameters in the parameter vector."""
+    return np.arange(fwd.slices[-1].start, fwd.slices[-1].stop)
+
+
+def screen(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None,
+           model: tuple[ExtendedForwardModel, RobustWhittle, LogPosterior] | None = None
            ) -> Screen:
-    """Fit only the candidate's parameters, the rest held at the parent's MAP."""
-    fwd, like, post = extend(parent, cand, priors)
+    """Fit only the candidate's parameters, the rest held at the parent's MAP (``model``:
+    the extended model if already built by :func:`extend`)."""
+    fwd, _, post = model or extend(parent, cand, priors)
     x0 = _embed(parent, fwd)
-    like.set_noise_reference(x0[:len(fwd.params)])
-    idx = np.arange(fwd.slices[-1].start, fwd.slices[-1].stop)
+    idx = _own_columns(fwd)
     eff = fwd.effect_params[-len(idx):]
     grids = np.meshgrid(*[_grid(e.prior, 12 if idx.size == 1 else 6) for e in eff])
     pts = np.tile(x0, (grids[0].size, 1))
@@ -246,6 +284,58 @@ def screen(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None
     if not np.isfinite(gain):
         gain = -np.inf
     return Screen(cand, gain, {fwd.params[j]: float(x[j]) for j in idx})
+
+
+def prescreened(parent: FittedModel, cand: Candidate, screen_min: float,
+                margin: float = PRUNE_MARGIN, priors: dict[str, Prior] | None = None
+                ) -> Screen:
+    """One candidate's screen by the route its linear screen decides (prescreen.py): the
+    linear screen itself where it is exact or prunes the candidate, the full screen
+    otherwise (on the same extended model)."""
+    return screen_round(parent, [cand], SelectOptions(screen_min=screen_min,
+                                                      prescreen_margin=margin,
+                                                      candidates=()), priors)[0]
+
+
+def screen_round(parent: FittedModel, pool: list[Candidate], opt: SelectOptions,
+                 priors: dict[str, Prior] | None = None) -> list[Screen]:
+    """The screens of a round's pool, in pool order. Without ``opt.prescreen`` every
+    candidate is screened fully. With it (prescreen.py), every candidate is linear-screened
+    first; exact ones keep that screen; nested, regular ones below screen_min - margin are
+    pruned; the others are screened fully, the candidates without a bound first, then the
+    bounded ones in decreasing order of prediction, each unless it is outranked by the
+    opt.n_refine best gains already known."""
+    if not opt.prescreen:
+        return [screen(parent, c, priors) for c in pool]
+    out: dict[str, Screen] = {}
+    staged = []
+    for c in pool:
+        model = extend(parent, c, priors)
+        fwd, _, post = model
+        idx = _own_columns(fwd)
+        lin = linear_screen(post, _embed(parent, fwd), idx, parent.log_post,
+                            exact=isinstance(c, SynchronousLine))
+        how = lin.route(opt.screen_min, opt.prescreen_margin)
+        if how == "full":
+            staged.append((c, model, lin))
+        else:
+            out[c.key] = Screen(c, lin.gain, dict(zip([fwd.params[j] for j in idx],
+                                                      map(float, lin.phi), strict=True)),
+                                how=how, linear_gain=_num(lin.gain))
+    staged.sort(key=lambda t: (t[2].bounded, -t[2].gain))       # unbounded first
+    for c, model, lin in staged:
+        known = sorted((s.gain for s in out.values()), reverse=True)
+        if lin.bounded and len(known) >= opt.n_refine and lin.upper < known[opt.n_refine - 1]:
+            fwd = model[0]
+            idx = _own_columns(fwd)
+            out[c.key] = Screen(c, lin.gain, dict(zip([fwd.params[j] for j in idx],
+                                                      map(float, lin.phi), strict=True)),
+                                how="outranked", linear_gain=_num(lin.gain))
+            continue
+        sc = screen(parent, c, priors, model)
+        sc.linear_gain = _num(lin.gain)
+        out[c.key] = sc
+    return [out[c.key] for c in pool]
 
 
 def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | None:
@@ -275,30 +365,65 @@ def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | 
     return None
 
 
-def refine(parent: FittedModel, sc: Screen, priors: dict[str, Prior] | None = None
-           ) -> FittedModel:
-    """Full MAP of parent + candidate from the screening point; Laplace Bayes factor."""
-    fwd, like, post = extend(parent, sc.candidate, priors)
+def refit(parent: FittedModel, sc: Screen, priors: dict[str, Prior] | None = None
+          ) -> FittedModel:
+    """Full MAP of parent + candidate from the screening point (no covariance, no Bayes
+    factor yet: see :func:`score`)."""
+    fwd, like, post = extend(parent, sc.candidate, priors, sc.phi)
     x0 = _embed(parent, fwd, sc.phi)
-    like.set_noise_reference(x0[:len(fwd.params)])
     # two starts: the parent's stiffness/damping values, which may sit where they absorbed
     # the missing physics (e.g. on a prior bound), and those parameters at their null
     alt0 = x0.copy()
     alt0[:len(fwd.theta_names)] = 0.0
     v = post(np.vstack([x0, alt0]))
     x, log_post = local_fit(post, x0 if v[0] >= v[1] else alt0)
-    idx = np.arange(fwd.slices[-1].start, fwd.slices[-1].stop)
-    cov = free_covariance(post, x, last=idx.size)
+    return FittedModel((*parent.candidates, sc.candidate), fwd, like, post, x, log_post)
+
+
+def score(parent: FittedModel, fm: FittedModel) -> FittedModel:
+    """The refitted model's Laplace covariance and its log Bayes factor against the
+    parent (module docstring), set in place; returns it."""
+    idx = _own_columns(fm.forward)
+    fm.cov = free_covariance(fm.post, fm.x, last=idx.size)
     log_bf = -np.inf
-    if cov is not None and np.isfinite(log_post):
-        block = cov[np.ix_(idx, idx)]
+    if fm.cov is not None and np.isfinite(fm.log_post):
+        block = fm.cov[np.ix_(idx, idx)]
         sign, logdet = np.linalg.slogdet(2 * np.pi * block)
         if sign > 0 and np.all(np.diag(block) > 0):
-            log_bf = (log_post - parent.log_post) + 0.5 * logdet
-    fitted = FittedModel((*parent.candidates, sc.candidate), fwd, like, post, x, log_post,
-                         cov=cov, log_bf=float(log_bf))
-    log.info("refined %s: log BF %.1f", sc.candidate.key, log_bf)
-    return fitted
+            log_bf = (fm.log_post - parent.log_post) + 0.5 * logdet
+    fm.log_bf = float(log_bf)
+    log.info("refined %s: log BF %.1f", fm.candidates[-1].key, log_bf)
+    return fm
+
+
+def refine(parent: FittedModel, sc: Screen, priors: dict[str, Prior] | None = None
+           ) -> FittedModel:
+    """Full MAP of parent + candidate from the screening point; Laplace Bayes factor."""
+    return score(parent, refit(parent, sc, priors))
+
+
+START_OCCAM_TOL = 0.05
+"""Nats. A line's two starts ('rest', 'steady') differ only by the transient at the start
+of the record: their Laplace Occam factors (1/2 log det of the candidate block) agreed
+to 3e-4 nats in every pair refitted on the foreign benchmark (21 pairs, log posteriors
+0.002-0.48 nats apart). When the two MAPs are further apart than this, the lower one
+cannot have the larger Bayes factor, and its Hessian is not formed."""
+
+
+def refine_line(parent: FittedModel, sc: Screen, priors: dict[str, Prior] | None = None
+                ) -> FittedModel:
+    """A synchronous line refined from both starts of the record, 'rest' (the screen's)
+    and 'steady' (the rotor already in synchronous steady state); the one with the larger
+    Bayes factor is kept (the 'rest' one on a tie). Only the better MAP is scored when
+    the two are more than START_OCCAM_TOL apart."""
+    rest = refit(parent, sc, priors)
+    steady = refit(parent, Screen(replace(sc.candidate, start="steady"), sc.gain, sc.phi),
+                   priors)
+    gap = steady.log_post - rest.log_post
+    if np.isfinite(gap) and abs(gap) > START_OCCAM_TOL:
+        return score(parent, steady if gap > 0 else rest)
+    rest, steady = score(parent, rest), score(parent, steady)
+    return steady if (steady.log_bf or -np.inf) > (rest.log_bf or -np.inf) else rest
 
 
 def own_noise_fit(fm: FittedModel) -> FittedModel:
@@ -339,7 +464,7 @@ def _try(current: FittedModel, pool: list[Candidate], rnd: int, opt: SelectOptio
     return the best refined model (None if none was refined)."""
     if progress:
         progress(f"round {rnd}: screening {len(pool)} candidates")
-    screens = [screen(current, c, priors) for c in pool]
+    screens = screen_round(current, pool, opt, priors)
     screens.sort(key=lambda s: -s.gain)
     refined: list[FittedModel] = []
     for sc in screens[:opt.n_refine]:
@@ -347,19 +472,16 @@ def _try(current: FittedModel, pool: list[Candidate], rnd: int, opt: SelectOptio
             break
         if progress:
             progress(f"round {rnd}: fitting {sc.candidate.key}")
-        fm = refine(current, sc, priors)
-        if isinstance(sc.candidate, SynchronousLine):
-            # the record may begin with the rotor already in synchronous steady state
-            alt = refine(current, Screen(replace(sc.candidate, start="steady"), sc.gain,
-                                         sc.phi), priors)
-            if (alt.log_bf or -np.inf) > (fm.log_bf or -np.inf):
-                fm = alt
-        refined.append(fm)
+        # a line: the record may begin with the rotor already in synchronous steady state
+        refined.append(refine_line(current, sc, priors)
+                       if isinstance(sc.candidate, SynchronousLine)
+                       else refine(current, sc, priors))
     by_key = {f.candidates[-1].key: f for f in refined}
     for sc in screens:
         f = by_key.get(sc.candidate.key)
         scores.append({"effect": sc.candidate.effect, "location": sc.candidate.location,
-                       "round": rnd, "screen_gain": _num(sc.gain),
+                       "round": rnd, "screen_gain": _num(sc.gain), "screen": sc.how,
+                       "linear_gain": sc.linear_gain,
                        "log_bayes_factor": None if f is None else _num(f.log_bf),
                        "log_posterior_odds": None if f is None or f.log_bf is None
                        else _num(posterior_log_odds(f.log_bf, len(pool))),

@@ -414,14 +414,17 @@ def _candidate_table(cands: list[dict[str, Any]]) -> Table:
         row = [effect, loc]
         for r in rounds:
             c = by_round.get(r)
-            row += ["", ""] if c is None else [g(c["screen_gain"], 3),
-                                               g(c["log_bayes_factor"], 3)]
+            row += ["", ""] if c is None else [
+                g(c["screen_gain"], 3)
+                + (" (predicted)" if c.get("screen") in ("pruned", "outranked") else ""),
+                g(c["log_bayes_factor"], 3)]
         rows.append(row)
     return Table("Every candidate tried", header, rows,
                  "Gain: the screening fit of the candidate's own parameters (its fingerprint "
                  "against the residual), in nats; the best are fitted fully and scored by "
                  "their log Bayes factor (–: not fitted fully). Blank: not tried in that "
-                 "round.")
+                 "round. 'predicted': the linearised screen put the candidate well below the "
+                 "bar or below the best of the round, and it was not fitted.")
 
 
 def _effect_title(name: str) -> str:
