@@ -95,7 +95,10 @@ def test_response_snr_is_infinite_without_noise_and_follows_the_noise_level(setu
     cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3}, dt=DT, duration=4.0,
                            seed=7)
     clean, _ = simulate_recording(rig, ctrl, cfg)
-    assert np.all(response_snr_db(clean, {"k_By": 0.3}, "reduced") > 200)
+    # round-off: the controller file's copy of the nominal model equals this process's
+    # reduction to ~1e-10 when they were made with other BLAS thread counts (a rotated
+    # basis, forward.state_transform), i.e. an SNR floor near 190 dB
+    assert np.all(response_snr_db(clean, {"k_By": 0.3}, "reduced") > 170)
     sigma = 2e-7
     noisy, _ = simulate_recording(rig, ctrl, SimulationConfig(
         truth="reduced", params={"k_By": 0.3}, dt=DT, duration=4.0, seed=7,

@@ -327,3 +327,32 @@ def test_remembered_band_sums_give_the_same_log_likelihood(noisy_like):
     like.set_noise_reference(np.array([0.25]))
     np.testing.assert_allclose(moved, like(th, ls), rtol=1e-10)
     like.set_noise_reference(np.array([0.3]))
+
+
+def test_a_controller_file_in_a_rotated_state_basis_keeps_the_fast_path(noise_free, rig):
+    """The file's copy of the nominal model may come in another state basis (the reduction's
+    basis is unique only up to rotations inside nearly repeated eigenspaces: another BLAS
+    thread count or machine gives another one). Rotated by a random T, the recording still
+    takes the fast path, with the same S(theta) x as the general loop path; a file whose
+    model differs (not a similarity) does not."""
+    case = next(c for c in CASES if c[0] == "observer")
+    rec = noise_free[case]
+    ctrl = rec.controller
+    T = np.eye(ctrl.A.shape[0]) + 0.3 * np.random.default_rng(4).standard_normal(ctrl.A.shape)
+    Ti = np.linalg.inv(T)
+    rot = copy.copy(rec)
+    object.__setattr__(rot, "controller", copy.copy(ctrl))
+    for name, val in (("A", T @ ctrl.A @ Ti), ("B", T @ ctrl.B), ("C", ctrl.C @ Ti)):
+        object.__setattr__(rot.controller, name, val)
+    fm = ForwardModel(rot, PARAMS)
+    assert fm.fast
+    gen = general_path(fm)
+    for th in THETA_BATCH[[0, 2]]:
+        assert rel_err(fm.simulate(th), gen.simulate(th)) < 1e-9
+        assert rel_err(fm.simulate(th), ForwardModel(rec, PARAMS).simulate(th)) < 1e-8
+    off = copy.copy(rot)
+    object.__setattr__(off, "controller", copy.copy(rot.controller))
+    A = rot.controller.A.copy()
+    A[0, 0] *= 1.001
+    object.__setattr__(off.controller, "A", A)
+    assert not ForwardModel(off, PARAMS).fast

@@ -54,7 +54,7 @@ def _refine_with(bfs, monkeypatch):
 
 
 def test_a_better_alternative_replaces_the_first_choice(setup, monkeypatch):
-    sel, first, second = setup
+    sel, _, _ = setup
     tried = _refine_with({"actuator_2nd@both": 3525.1, "time_delay@controller": 3536.8},
                          monkeypatch)
     out = rv.revisit(sel)

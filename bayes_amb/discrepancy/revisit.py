@@ -110,7 +110,7 @@ def revisit(sel: Selection, priors: dict[str, Prior] | None = None,
             continue
         # the same prior odds as the choice had in its round (1 / K)
         k = np.exp((old.log_bf or 0.0) - old.log_odds) if old.log_odds is not None else 1.0
-        best.log_odds = posterior_log_odds(best_bf, int(round(k)))
+        best.log_odds = posterior_log_odds(best_bf, round(k))
         sel.accepted = [best if f is old else f for f in sel.accepted]
         sel.final = best
         if progress:

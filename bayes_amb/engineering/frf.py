@@ -35,6 +35,7 @@ from bayes_amb.engineering.loop import closed_loop_modes
 from bayes_amb.engineering.quantities import draws_from
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import Recording
+from bayes_amb.threads import limited_threads
 
 __all__ = ["FrfEstimate", "FrfResult", "controller_response", "frequency_responses",
            "joint_io_frf"]
@@ -167,6 +168,7 @@ def default_nperseg(recording: Recording) -> int:
     return int(np.clip(2 ** int(np.floor(np.log2(max(n, 64)))), 64, 4096))
 
 
+@limited_threads
 def frequency_responses(source: Any, recording: Recording, n_draws: int = 50,
                         model: str = "full", nperseg: int | None = None, seed: int = 0
                         ) -> FrfResult:

@@ -55,6 +55,7 @@ from bayes_amb.engineering.loop import MODE_LABELS, closed_loop_modes, log_decre
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import CHANNELS
+from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
 __all__ = ["API617_LOGDEC", "CENTRAL_Z", "CentralRegion", "Draws", "EngineeringResult",
@@ -372,6 +373,7 @@ def _sens_grid(rec: Recording, n_freq: int) -> NDArray:
     return np.logspace(0.0, np.log10(0.5 / rec.dt), n_freq)
 
 
+@limited_threads
 def physical_quantities(source: Any, recording: Recording,
                         speeds_rpm: NDArray | list[float] | None = None, n_draws: int = 200,
                         model: str = "full", n_freq: int = 400, seed: int = 0

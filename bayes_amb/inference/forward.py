@@ -38,6 +38,44 @@ from bayes_amb.uncertainty import UncertainPlant, lft_reduced, parse_param_list
 _TRANSIENT_TOL = 1e-13
 
 
+def state_transform(A: NDArray, B: NDArray, C: NDArray, Ad: NDArray, Bd: NDArray,
+                    Cd: NDArray, tol: float = 1e-7) -> NDArray | None:
+    """T with (A, B, C) = (T Ad T^-1, T Bd, Cd T^-1), i.e. x = T x_d, or None if there is
+    none (to ``tol``, relative, in each of the three equations).
+
+    A controller file carries its own copy of the nominal reduced model. Its state basis is
+    the reduction's, which is unique only up to a rotation inside a (nearly) repeated
+    eigenspace: a file exported with other BLAS threads, or on another machine, may hold the
+    same model in a rotated basis. T is found from the linear equations T Ad = A T,
+    T Bd = B, C T = Cd by least squares, each block scaled to unit norm.
+
+    >>> import numpy as np
+    >>> Ad, Bd, Cd = np.diag([0.9, 0.8]), np.eye(2)[:, :1], np.ones((1, 2))
+    >>> T = np.array([[1.0, 2.0], [0.5, 3.0]])
+    >>> Ti = np.linalg.inv(T)
+    >>> np.allclose(state_transform(T @ Ad @ Ti, T @ Bd, Cd @ Ti, Ad, Bd, Cd), T)
+    True
+    """
+    n = Ad.shape[0]
+    if A.shape != Ad.shape or B.shape != Bd.shape or C.shape != Cd.shape:
+        return None
+    eye = np.eye(n)
+    sa, sb, sc = (1.0 / max(np.linalg.norm(M), 1e-300) for M in (Ad, Bd, Cd))
+    # vec(T X) = (X^T kron I) vec(T), vec(X T) = (I kron X) vec(T) (column-major vec)
+    M = np.vstack([sa * (np.kron(Ad.T, eye) - np.kron(eye, A)),
+                   sb * np.kron(Bd.T, eye),
+                   sc * np.kron(eye, C)])
+    rhs = np.concatenate([np.zeros(n * n), sb * B.ravel(order="F"), sc * Cd.ravel(order="F")])
+    t, *_ = np.linalg.lstsq(M, rhs, rcond=None)
+    T = t.reshape(n, n, order="F")
+    if not np.all(np.isfinite(T)) or np.linalg.cond(T) > 1e8:
+        return None
+    ok = (np.linalg.norm(T @ Ad - A @ T) <= tol * np.linalg.norm(A) * np.linalg.norm(T)
+          and np.linalg.norm(T @ Bd - B) <= tol * np.linalg.norm(B)
+          and np.linalg.norm(C @ T - Cd) <= tol * np.linalg.norm(Cd))
+    return T if ok else None
+
+
 @dataclass
 class ModalBatch:
     """Diagonalised stack of discrete systems: lam (nb, ns), Bm (nb, ns, m), Cm (nb, p, ns)."""
@@ -151,16 +189,16 @@ class ForwardModel:
             C = -ctrl.C[4:]
             A = ctrl.A - B @ F - L @ C
             self.parts = LoopParts(ctrl.A, ctrl.B, ctrl.C, ctrl.D, A, B, C, L, self.port)
-            same = (A.shape == Ad.shape and np.allclose(A, Ad, rtol=0, atol=1e-9)
-                    and np.allclose(B, Bd, rtol=1e-7, atol=1e-12 * np.abs(Bd).max())
-                    and np.allclose(C, self.reduced.C, rtol=1e-7, atol=0))
-            if same and self.port == "eta":
+            T = state_transform(A, B, C, Ad, Bd, self.reduced.C)
+            if T is not None and self.port == "eta":
                 self.fast = True
-                self.F, self.L = F, L
+                self.F, self.L = F, L                  # in the file's state basis
+                # the same observer in this model's basis (x_file = T x): F T, T^-1 L
+                self._F, self._L = F @ T, np.linalg.solve(T, L)
                 # theta-independent parts of the compiled error form (contiguous float64)
                 self._error_parts = tuple(np.ascontiguousarray(a, dtype=float)
-                                          for a in (Ad, Bd, self.reduced.C, F, L))
-                self._LC = np.ascontiguousarray(L @ self.reduced.C, dtype=float)
+                                          for a in (Ad, Bd, self.reduced.C, self._F, self._L))
+                self._LC = np.ascontiguousarray(self._L @ self.reduced.C, dtype=float)
         else:
             L = design_observer_controller(self.reduced, dt).L
             self.parts = LoopParts(ctrl.A, ctrl.B, ctrl.C, ctrl.D, Ad, Bd, self.reduced.C, L,
@@ -193,7 +231,7 @@ class ForwardModel:
                 A_S, B_S, C_S = error_form_compiled(*self._error_parts, Ap, Bp, self._LC)
             else:
                 Ad, Bd, C = self.nominal
-                A_S, B_S, C_S = error_form_matrices(Ad, Bd, C, self.F, self.L, Ap, Bp)
+                A_S, B_S, C_S = error_form_matrices(Ad, Bd, C, self._F, self._L, Ap, Bp)
             return A_S, B_S, np.broadcast_to(C_S, (Ap.shape[0], *C_S.shape))
         A_cl, B_cl, C_cl, _ = loop_matrices(self.parts, Ap, Bp, self.plant.C)
         return A_cl, B_cl[:, :, :4], C_cl

@@ -29,6 +29,7 @@ from bayes_amb.report.collect import ReportError, RunData
 from bayes_amb.report.derived import derive
 from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, g, gsd
 from bayes_amb.rig import CHANNELS
+from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec
 
 __all__ = ["PDF_BACKENDS", "ReportResult", "build_sections", "render_html", "summary_section",
@@ -374,6 +375,7 @@ def build_sections(run: RunData, argv: list[str], opts: ReportOptions,
     return [summary_section(run, facts), *body], meta
 
 
+@limited_threads
 def write_report(run: RunData, out_dir: str | Path, *, argv: list[str] | None = None,
                  options: ReportOptions | None = None, pdf: bool = True,
                  pdf_backend: str = "auto",

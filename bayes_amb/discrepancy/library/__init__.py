@@ -47,7 +47,8 @@ from bayes_amb.discrepancy.library.unbalance import Unbalance
 __all__ = ["BEARING_COEFFICIENTS", "NOMINAL_FAMILY", "REGISTRY", "VOCABULARY", "Actuator2nd",
            "ActuatorGain", "ActuatorLag", "BearingCoefficient", "Candidate", "CrossCoupling",
            "EffectEntry", "EffectParam", "Equivalence", "FlexibleMode", "ModelContext",
-           "Quantity", "ResidualFlexibility", "Runout", "Sampled", "SensorDelay", "SensorGain", "SensorLag",
+           "Quantity", "ResidualFlexibility", "Runout", "Sampled", "SensorDelay", "SensorGain",
+           "SensorLag",
            "SynchronousLine", "TimeDelay", "Unbalance", "all_candidates", "entry",
            "equivalents_of", "left_out_coefficients", "library_table", "make_candidate",
            "markdown_table"]

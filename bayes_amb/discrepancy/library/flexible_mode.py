@@ -69,7 +69,8 @@ def _make(location: str) -> FlexibleMode:
     try:
         pair = int(location.rsplit(" ", 1)[-1])
     except ValueError:
-        raise ValueError(f"flexible_mode: location {location!r} is not 'bending pair <k>'")
+        raise ValueError(f"flexible_mode: location {location!r} is not 'bending pair <k>'"
+                         ) from None
     return FlexibleMode("flexible_mode", location, pair)
 
 
