@@ -275,3 +275,22 @@ def test_remembered_band_sums_follow_the_noise_reference(rec):
     after = like.band_sums(P)[0]
     fresh = like._compute_band_sums(P)[0]
     assert np.array_equal(after, fresh) and not np.allclose(after, before, rtol=1e-9)
+
+
+def test_fused_call_gives_the_staged_paths_log_likelihood(rec):
+    """The one compiled call (bayes_amb.inference.fused) chains the staged path's compiled
+    stages: per band the same log-likelihood to rounding (a repeated row sends the batch
+    the staged way; rows are independent)."""
+    rng = np.random.default_rng(3)
+    like, p = next(_likelihoods(rec))
+    P = np.vstack([_batch(p, rng) for _ in range(3)])[:16]
+    ls = np.tile([np.log10(2e-8), -9.0, np.log10(0.02)], (16, 1))
+    like._last_sums, like._fused = None, None
+    fused = like.pointwise(P, ls)
+    assert like._fused is not None                  # the fused call was taken
+    like._last_sums = None
+    staged = like.pointwise(np.vstack([P, P[:1]]), np.vstack([ls, ls[:1]]))[:16]
+    assert np.all(np.isfinite(fused[:-1]))
+    ok = np.isfinite(staged)
+    assert np.array_equal(ok, np.isfinite(fused))
+    assert np.all(np.abs(fused[ok] - staged[ok]) <= 1e-12 * np.abs(staged[ok]))

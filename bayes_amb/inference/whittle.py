@@ -50,7 +50,8 @@ from scipy.signal import lfilter, welch
 from bayes_amb.control.discrete import ss_freqresp, ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference import kernels, walker_kernels
-from bayes_amb.inference.forward import ForwardModel, ModalBatch, dft_response
+from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
+from bayes_amb.inference.fused import FusedLikelihood
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
 NOISE_UNITS = ("m", "m", "A")
@@ -299,7 +300,7 @@ class WhittleLikelihood:
         until set_noise_reference. The arrays returned may be shared: do not modify them.
         """
         theta = np.ascontiguousarray(np.atleast_2d(theta), dtype=float)
-        key = (id(self.forward), kernels.use_compiled(), theta.shape, theta.tobytes())
+        key = self._sums_key(theta)
         last = getattr(self, "_last_sums", None)
         if last is not None and last[0] == key:
             return last[1], last[2]
@@ -316,6 +317,38 @@ class WhittleLikelihood:
             Pb, stable = self._compute_band_sums(theta)
         self._last_sums = (key, Pb, stable)
         return Pb, stable
+
+    def _sums_key(self, theta: NDArray) -> tuple:
+        """Key of the remembered last batch of band sums (theta C-contiguous float64)."""
+        return (id(self.forward), kernels.use_compiled(), theta.shape, theta.tobytes())
+
+    def _pointwise_fused(self, theta: NDArray, ls: NDArray) -> NDArray | None:
+        """pointwise in one compiled call (bayes_amb.inference.fused), or None where the
+        staged path applies: another likelihood path, a subclass, a loop not in observer
+        form, a batch below walker_kernels.LANES_MIN_BATCH rows, band sums to be taken from
+        memory (the last batch again, remembered rows, repeated rows) or a member the
+        compiled modal form rejects. Remembers the batch's band sums as band_sums does."""
+        if (type(self) is not WhittleLikelihood or type(self.forward) is not ForwardModel
+                or not self.forward.fast or theta.shape[0] < walker_kernels.LANES_MIN_BATCH
+                or getattr(self, "_row_sums", None) is not None
+                or not kernels.compiled_modal()):
+            return None
+        theta = np.ascontiguousarray(theta, dtype=float)
+        key = self._sums_key(theta)
+        last = self._last_sums
+        if last is not None and last[0] == key:
+            return None
+        if len({row.tobytes() for row in theta}) < theta.shape[0]:
+            return None
+        fused = getattr(self, "_fused", None)
+        if fused is None or not fused.matches(self):
+            fused = self._fused = FusedLikelihood(self, _TRANSIENT_TOL)
+        out = fused(theta, np.ascontiguousarray(10.0 ** (2 * ls), dtype=float))
+        if out is None:
+            return None
+        ll, Pb, stable = out
+        self._last_sums = (key, Pb, stable)
+        return ll
 
     def remember_rows(self, n_rows: int) -> None:
         """Remember the band sums of the last n_rows distinct theta rows (0: off, the
@@ -363,6 +396,9 @@ class WhittleLikelihood:
         """Per-band log-likelihood (nb, n_bands); -inf rows where G(theta) is not stabilised."""
         theta = np.atleast_2d(theta)
         ls = np.atleast_2d(log10_sigma)
+        ll = self._pointwise_fused(theta, ls)
+        if ll is not None:
+            return ll
         Pb, stable = self.band_sums(theta)                          # (nb, nbands, 4, 4)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
