@@ -15,7 +15,7 @@ import pytest
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import ActuatorLag, SensorGain
 from bayes_amb.discrepancy import gauss_newton as gn
-from bayes_amb.discrepancy.select import build, extend, fit_nominal
+from bayes_amb.discrepancy.fitting import build, extend, fit_nominal
 from bayes_amb.inference.estimate import least_squares_theta, local_search
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps

@@ -41,6 +41,7 @@ from bayes_amb.discrepancy.fitstats import (
     residual_spectrum,
     theta_summary,
 )
+from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal, own_noise_fit
 from bayes_amb.discrepancy.locate import (
     LocateOptions,
     Location,
@@ -49,14 +50,7 @@ from bayes_amb.discrepancy.locate import (
     synchronous_speed,
 )
 from bayes_amb.discrepancy.revisit import revisit
-from bayes_amb.discrepancy.select import (
-    FittedModel,
-    Selection,
-    SelectOptions,
-    fit_nominal,
-    own_noise_fit,
-    select,
-)
+from bayes_amb.discrepancy.select import Selection, SelectOptions, select
 from bayes_amb.discrepancy.story import plain_language
 from bayes_amb.discrepancy.unexplained import unexplained_block
 from bayes_amb.errors import BayesAmbError

@@ -13,13 +13,13 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import welch
 
+from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.discrepancy.locate import (
     ljung_box,
     noise_cholesky,
     whiten,
     whitened_series,
 )
-from bayes_amb.discrepancy.select import FittedModel
 from bayes_amb.rig import CHANNELS
 from bayes_amb.uncertainty import get_spec
 

@@ -24,14 +24,12 @@ from typing import Any
 
 import numpy as np
 
+from bayes_amb.discrepancy.fitting import FittedModel, _embed, free_covariance, local_fit
 from bayes_amb.discrepancy.library.registry import admissible, make_candidate
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.discrepancy.select import (
-    FittedModel,
     Screen,
     Selection,
-    free_covariance,
-    local_fit,
     posterior_log_odds,
     refine,
     screen,
@@ -49,9 +47,7 @@ def _without(final: FittedModel, i: int) -> FittedModel:
     fwd = ExtendedForwardModel(fwd0.recording, fwd0.theta_names, cands, template=fwd0)
     like = final.like.for_model(fwd, fwd.null)
     post = LogPosterior(like, fwd.priors)
-    x0 = np.concatenate([fwd.null, final.log10_sigma])
-    for j, n in enumerate(fwd.params):
-        x0[j] = final.value(n)
+    x0 = _embed(final, fwd)
     like.set_noise_reference(x0[:len(fwd.params)])
     x, log_post = local_fit(post, x0)
     return FittedModel(cands, fwd, like, post, x, log_post, cov=free_covariance(post, x))

@@ -27,8 +27,8 @@ from typing import Any
 
 import numpy as np
 
+from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.discrepancy.locate import Location, locate_bands
-from bayes_amb.discrepancy.select import FittedModel
 from bayes_amb.rig import CHANNELS
 
 STRUCTURED = ("coherence", "crosscorr", "line")

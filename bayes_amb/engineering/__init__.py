@@ -12,6 +12,7 @@ from bayes_amb.engineering.frf import (
     frequency_responses,
     joint_io_frf,
 )
+from bayes_amb.engineering.intervals import CENTRAL_Z, CentralRegion, central_region, interval90
 from bayes_amb.engineering.loop import (
     MODE_LABELS,
     LoopModes,
@@ -21,14 +22,10 @@ from bayes_amb.engineering.loop import (
 )
 from bayes_amb.engineering.quantities import (
     API617_LOGDEC,
-    CENTRAL_Z,
-    CentralRegion,
     Draws,
     EngineeringResult,
     Quantity,
-    central_region,
     draws_from,
-    interval90,
     physical_quantities,
     required_separation_margin,
 )

@@ -1,0 +1,211 @@
+"""Fitting one model to a recording: the nominal MAP, a model extended by candidates, the
+local Gauss-Newton search, and the Laplace covariance over its free dimensions.
+
+Every model compared in the diagnosis (select.py) is a :class:`FittedModel`: the nominal
+one (fit_nominal) and each extension of it by a candidate (extend, then the search in
+select.py). Extensions share the parent's recording data and noise filters, so that models
+compared with each other share one noise-spectrum family; the reported model is refitted
+with its own noise filters at the end (own_noise_fit).
+"""
+
+from __future__ import annotations
+
+import copy
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.discrepancy.candidates import Candidate
+from bayes_amb.discrepancy.gauss_newton import gauss_newton, least_squares_start
+from bayes_amb.discrepancy.likelihood import RobustWhittle
+from bayes_amb.discrepancy.model import ExtendedForwardModel
+from bayes_amb.inference.estimate import (
+    LogPosterior,
+    _initial_point,
+    _theta_start,
+    hessian_covariance,
+)
+from bayes_amb.inference.priors import Prior
+from bayes_amb.io.recording import Recording
+
+
+@dataclass
+class FittedModel:
+    """One model fitted to the recording: its candidates, likelihood and MAP.
+
+    x is the MAP of [parameters, log10 sigma]; cov the Laplace covariance over the free
+    dimensions (None where it could not be formed); log_bf the log Bayes factor against the
+    model it extends (None for the nominal one); samples emcee draws if it was sampled.
+    """
+
+    candidates: tuple[Candidate, ...]
+    forward: ExtendedForwardModel
+    like: RobustWhittle
+    post: LogPosterior
+    x: NDArray
+    log_post: float
+    cov: NDArray | None = None
+    log_bf: float | None = None
+    samples: NDArray | None = None      # emcee draws (walkers, draws, p + 3) when sampled
+    log_odds: float | None = None       # log posterior odds when accepted (Multiplicity)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.forward.params
+
+    @property
+    def p(self) -> int:
+        return len(self.names)
+
+    @property
+    def params(self) -> NDArray:
+        return self.x[:self.p]
+
+    @property
+    def log10_sigma(self) -> NDArray:
+        return self.x[self.p:]
+
+    def value(self, name: str) -> float:
+        return float(self.x[self.names.index(name)])
+
+
+def build(recording: Recording, params: tuple[str, ...], eps: NDArray,
+          candidates: tuple[Candidate, ...] = (), priors: dict[str, Prior] | None = None,
+          start: int = 0) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
+    """Forward model, likelihood and posterior of the nominal model plus candidates
+    (``start``: samples of pre-history, see likelihood.RobustWhittle)."""
+    fwd = ExtendedForwardModel(recording, params, candidates, priors)
+    like = RobustWhittle(fwd, eps, start=start)
+    return fwd, like, LogPosterior(like, fwd.priors)
+
+
+def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None,
+           phi: dict[str, float] | None = None
+           ) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
+    """Parent + candidate, sharing the parent's recording data and noise filters (models
+    compared with each other share one noise-spectrum family), with the line bases at the
+    parent's MAP and the candidate at ``phi`` (default its null): the point its screen or
+    refit starts from (see _embed)."""
+    pf = parent.forward
+    fwd = ExtendedForwardModel(pf.recording, pf.theta_names, (*parent.candidates, cand),
+                               priors, template=pf)
+    like = parent.like.for_model(fwd, _embed(parent, fwd, phi)[:len(fwd.params)])
+    return fwd, like, LogPosterior(like, fwd.priors)
+
+
+def local_fit(post: LogPosterior, x0: NDArray) -> tuple[NDArray, float]:
+    """Gauss-Newton trust-region MAP search from x0 over every dimension
+    (gauss_newton.py), then the line bases (if any) are refreshed at the optimum and the
+    search repeated."""
+    x, _ = gauss_newton(post, x0)
+    like: RobustWhittle = post.likelihood  # type: ignore[assignment]
+    if like.lines:
+        like.set_noise_reference(x[:post.p])
+        x, _ = gauss_newton(post, x)
+    return x, float(post(x[None])[0])
+
+
+def nominal_map(post: LogPosterior) -> NDArray:
+    """MAP of the nominal model, as identification's find_map searches it, but by
+    Gauss-Newton: the eq. 15 estimate (its noise filters then used), starts at it (noise
+    intensities on a grid, and with sigma_r1 switched on at two levels: from its lower
+    bound its gradient is ~0) and at the nominal model, a short search from each and a full
+    one from the best; the noise filters refreshed at that optimum, the noise intensities
+    re-seeded on the grid, and the search repeated."""
+    p = post.p
+    theta_ls = least_squares_start(post, _theta_start(post))
+    post.likelihood.set_noise_reference(theta_ls)
+    starts = [_initial_point(post, theta_ls), _initial_point(post, _theta_start(post))]
+    for level in (-6.0, -4.0):
+        alt = starts[0].copy()
+        alt[p + 1] = level
+        starts.append(alt)
+    short = [gauss_newton(post, s, max_iter=3) for s in starts]
+    x = short[int(np.argmax([f for _, f in short]))][0]
+    for rnd in range(2):
+        if rnd > 0:
+            alt = _initial_point(post, x[:p])
+            if post(alt[None])[0] > post(x[None])[0]:
+                x = alt
+        x, _ = gauss_newton(post, x)
+        post.likelihood.set_noise_reference(x[:p])
+    return x
+
+
+def fit_nominal(recording: Recording, params: tuple[str, ...], eps: NDArray,
+                priors: dict[str, Prior] | None = None, seed: int = 0,
+                start: int = 0) -> FittedModel:
+    """The nominal model's MAP over the whole band (nominal_map; ``seed`` is kept for the
+    interface: the search draws no random starts)."""
+    fwd, like, post = build(recording, params, eps, (), priors, start)
+    x = nominal_map(post)
+    # from here on the noise filters stay at this fit (shared with the extended models)
+    like.fixed_filters = like.phi_sources
+    x, log_post = local_fit(post, x)
+    return FittedModel((), fwd, like, post, x, log_post, cov=free_covariance(post, x))
+
+
+def _embed(parent: FittedModel, fwd: ExtendedForwardModel, phi: dict[str, float] | None = None
+           ) -> NDArray:
+    """The parent's MAP in the child's layout; the child's new parameters at their null."""
+    x = np.concatenate([fwd.null, parent.log10_sigma])
+    for j, n in enumerate(fwd.params):
+        if n in parent.names:
+            x[j] = parent.value(n)
+        elif phi and n in phi:
+            x[j] = phi[n]
+    return x
+
+
+def _bounds(post: LogPosterior) -> list[tuple[float, float]]:
+    return [(-np.inf if lo is None else lo, np.inf if hi is None else hi)
+            for lo, hi in post.bounds()]
+
+
+def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | None:
+    """Laplace covariance over the dimensions not on a prior bound (zeros elsewhere).
+
+    The noise intensities are held fixed (they are nearly independent of the physical
+    parameters, and one the data do not inform is flat); if that Hessian is not negative
+    definite, all free dimensions are tried, then only the last ``last`` parameters (a
+    candidate's own).
+    """
+    bnds = _bounds(post)
+    span = np.array([hi - lo if np.isfinite(hi - lo) else 1.0 for lo, hi in bnds])
+    at_bound = np.array([min(abs(v - lo), abs(hi - v)) < 1e-6 * s
+                         for v, (lo, hi), s in zip(x, bnds, span, strict=True)])
+    free = np.flatnonzero(~at_bound)
+    tries = [free[free < post.p], free]
+    if last:
+        tries.append(free[(free >= post.p - last) & (free < post.p)])
+    for idx in tries:
+        if idx.size == 0:
+            continue
+        sub = hessian_covariance(post, x, idx)
+        if sub is not None:
+            cov = np.zeros((x.size, x.size))
+            cov[np.ix_(idx, idx)] = sub
+            return cov
+    return None
+
+
+def own_noise_fit(fm: FittedModel) -> FittedModel:
+    """The model refitted with its own loop noise filters (eq. 14 through its extended
+    loop, at its MAP) instead of the shared nominal ones: the filters the comparison shares
+    are right for the nominal loop only, and a lag, delay or flexible mode changes how the
+    noise reaches eps. Its posterior is the one reported; its Bayes factor stays the one
+    from the comparison."""
+    if not fm.candidates:
+        return fm
+    like = copy.copy(fm.like)
+    like.fixed_filters = None
+    like.set_noise_reference(fm.params)
+    post = LogPosterior(like, fm.forward.priors)
+    x, log_post = local_fit(post, fm.x)
+    like.set_noise_reference(x[:fm.p])
+    x, log_post = local_fit(post, x)
+    idx = np.arange(fm.forward.slices[-1].start, fm.forward.slices[-1].stop)
+    cov = free_covariance(post, x, last=idx.size)
+    return FittedModel(fm.candidates, fm.forward, like, post, x, log_post, cov=cov,
+                       log_bf=fm.log_bf, log_odds=fm.log_odds)
