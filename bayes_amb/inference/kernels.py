@@ -217,15 +217,21 @@ def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: N
     return out
 
 
+def lines_or_empty(E: NDArray, nb: int, lines: NDArray | None, coef: NDArray | None
+                   ) -> tuple[NDArray, NDArray]:
+    """The synchronous-line bases (nf, p, nl) and coefficients (nb, nl) as given, or empty
+    ones (nl = 0) when there are none."""
+    if lines is None or coef is None or coef.shape[1] == 0:
+        return np.zeros((E.shape[0], E.shape[1], 0), dtype=complex), np.zeros((nb, 0))
+    return lines, coef
+
+
 def _arguments(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray, z: NDArray,
                E: NDArray, scale: float, lines: NDArray | None, coef: NDArray | None
                ) -> tuple:
     """The kernels' common arguments, contiguous, in real arithmetic where they loop."""
     nb = lam.shape[0]
-    p = E.shape[1]
-    if lines is None or coef is None or coef.shape[1] == 0:
-        lines = np.zeros((E.shape[0], p, 0), dtype=complex)
-        coef = np.zeros((nb, 0))
+    lines, coef = lines_or_empty(E, nb, lines, coef)
     c128, f64 = np.complex128, np.float64
     X = np.asarray(X, dtype=c128)
     z = np.asarray(z, dtype=c128)

@@ -22,9 +22,63 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from bayes_amb.inference.kernels import lines_or_empty
+
 LANES_MIN_BATCH = 12
 """Smallest batch for which :func:`residual_band_sums_lanes` beats the walker-by-walker
 kernel (measured: at 8 walkers it is 1.2x slower, at 16 1.5x faster, at 32 1.6x)."""
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _zero_sums(sr, si):  # pragma: no cover - compiled
+    # the upper triangle of a band's running sums (p, p, nb), real and imaginary parts
+    p, _, nb = sr.shape
+    for i in range(p):
+        for j in range(i, p):
+            for b in range(nb):
+                sr[i, j, b] = 0.0
+                si[i, j, b] = 0.0
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _finish_residual(rr, ri, Er, Ei, Lr, Li, coef, k):  # pragma: no cover - compiled
+    # rr, ri (p, nb) hold the model part (C u) / scale of bin k; make them the residual
+    # R = E_k - (C u) / scale - lines_k . coef
+    p, nb = rr.shape
+    nl = coef.shape[0]
+    for i in range(p):
+        eri, eii = Er[k, i], Ei[k, i]
+        for b in range(nb):
+            rr[i, b] = eri - rr[i, b]
+            ri[i, b] = eii - ri[i, b]
+        for j in range(nl):
+            lrj, lij = Lr[k, i, j], Li[k, i, j]
+            for b in range(nb):
+                rr[i, b] -= lrj * coef[j, b]
+                ri[i, b] -= lij * coef[j, b]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _accumulate(sr, si, rr, ri):  # pragma: no cover - compiled
+    # upper triangle of P_b += R_k R_k^H for every walker
+    p, nb = rr.shape
+    for i in range(p):
+        for j in range(i, p):
+            for b in range(nb):
+                sr[i, j, b] += rr[i, b] * rr[j, b] + ri[i, b] * ri[j, b]
+                si[i, j, b] += ri[i, b] * rr[j, b] - rr[i, b] * ri[j, b]
+
+
+@njit(cache=True, nogil=True, inline="always")
+def _store_band(out, sr, si, band):  # pragma: no cover - compiled
+    # the Hermitian P_b of every walker into out (nb, nbands, p, p)
+    p, _, nb = sr.shape
+    for b in range(nb):
+        for i in range(p):
+            for j in range(i, p):
+                out[b, band, i, j] = sr[i, j, b] + 1j * si[i, j, b]
+                if j > i:
+                    out[b, band, j, i] = sr[i, j, b] - 1j * si[i, j, b]
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -35,16 +89,11 @@ def _band_sums_lanes(lr, li, Br, Bi, Cr, Ci, xr, xi, Xr, Xi, zr, zi, Er, Ei, Lr,
     ns, nb = lr.shape
     m = Br.shape[1]
     p = Cr.shape[0]
-    nl = coef.shape[0]
     rr, ri = np.empty((p, nb)), np.empty((p, nb))
     ur, ui = np.empty(nb), np.empty(nb)
     sr, si = np.empty((p, p, nb)), np.empty((p, p, nb))
     for band in range(starts.size):
-        for i in range(p):
-            for j in range(i, p):
-                for b in range(nb):
-                    sr[i, j, b] = 0.0
-                    si[i, j, b] = 0.0
+        _zero_sums(sr, si)
         for k in range(starts[band], starts[band] + counts[band]):
             zrk, zik = zr[k], zi[k]
             for i in range(p):
@@ -71,27 +120,9 @@ def _band_sums_lanes(lr, li, Br, Bi, Cr, Ci, xr, xi, Xr, Xi, zr, zi, Er, Ei, Lr,
                     for b in range(nb):
                         rr[i, b] += Cr[i, s, b] * ur[b] - Ci[i, s, b] * ui[b]
                         ri[i, b] += Cr[i, s, b] * ui[b] + Ci[i, s, b] * ur[b]
-            for i in range(p):         # R = E - (Cm u) / scale - lines . coef
-                eri, eii = Er[k, i], Ei[k, i]
-                for b in range(nb):
-                    rr[i, b] = eri - rr[i, b]
-                    ri[i, b] = eii - ri[i, b]
-                for j in range(nl):
-                    lrj, lij = Lr[k, i, j], Li[k, i, j]
-                    for b in range(nb):
-                        rr[i, b] -= lrj * coef[j, b]
-                        ri[i, b] -= lij * coef[j, b]
-            for i in range(p):         # P_b += R_k R_k^H
-                for j in range(i, p):
-                    for b in range(nb):
-                        sr[i, j, b] += rr[i, b] * rr[j, b] + ri[i, b] * ri[j, b]
-                        si[i, j, b] += ri[i, b] * rr[j, b] - rr[i, b] * ri[j, b]
-        for b in range(nb):
-            for i in range(p):
-                for j in range(i, p):
-                    out[b, band, i, j] = sr[i, j, b] + 1j * si[i, j, b]
-                    if j > i:
-                        out[b, band, j, i] = sr[i, j, b] - 1j * si[i, j, b]
+            _finish_residual(rr, ri, Er, Ei, Lr, Li, coef, k)   # R = E - (C u) - lines . coef
+            _accumulate(sr, si, rr, ri)                          # P_b += R_k R_k^H
+        _store_band(out, sr, si, band)
 
 
 def residual_band_sums_lanes(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray,
@@ -115,9 +146,7 @@ def residual_band_sums_lanes(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray
     """
     nb = lam.shape[0]
     p = E.shape[1]
-    if lines is None or coef is None or coef.shape[1] == 0:
-        lines = np.zeros((E.shape[0], p, 0), dtype=complex)
-        coef = np.zeros((nb, 0))
+    lines, coef = lines_or_empty(E, nb, lines, coef)
     c128, f64 = np.complex128, np.float64
     out = np.empty((nb, starts.size, p, p), dtype=c128)
     _lanes_call(np.ascontiguousarray(lam, c128), np.ascontiguousarray(Bm, c128),
@@ -179,16 +208,11 @@ def _band_sums_pairs(M, B2, C2, x2, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts
     nb = M.shape[3]
     m = B2.shape[2]
     p = C2.shape[1]
-    nl = coef.shape[0]
     rr, ri = np.empty((p, nb)), np.empty((p, nb))
     sr, si = np.empty((p, p, nb)), np.empty((p, p, nb))
     w1r, w1i, w2r, w2i = np.empty(nb), np.empty(nb), np.empty(nb), np.empty(nb)
     for band in range(starts.size):
-        for i in range(p):
-            for j in range(i, p):
-                for b in range(nb):
-                    sr[i, j, b] = 0.0
-                    si[i, j, b] = 0.0
+        _zero_sums(sr, si)
         for k in range(starts[band], starts[band] + counts[band]):
             zrk, zik = zr[k], zi[k]
             for i in range(p):
@@ -229,27 +253,9 @@ def _band_sums_pairs(M, B2, C2, x2, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts
                     for b in range(nb):
                         rr[i, b] += C2[q, i, 0, b] * w1r[b] + C2[q, i, 1, b] * w2r[b]
                         ri[i, b] += C2[q, i, 0, b] * w1i[b] + C2[q, i, 1, b] * w2i[b]
-            for i in range(p):         # R = E - (C u) / scale - lines . coef
-                eri, eii = Er[k, i], Ei[k, i]
-                for b in range(nb):
-                    rr[i, b] = eri - rr[i, b]
-                    ri[i, b] = eii - ri[i, b]
-                for j in range(nl):
-                    lrj, lij = Lr[k, i, j], Li[k, i, j]
-                    for b in range(nb):
-                        rr[i, b] -= lrj * coef[j, b]
-                        ri[i, b] -= lij * coef[j, b]
-            for i in range(p):         # P_b += R_k R_k^H
-                for j in range(i, p):
-                    for b in range(nb):
-                        sr[i, j, b] += rr[i, b] * rr[j, b] + ri[i, b] * ri[j, b]
-                        si[i, j, b] += ri[i, b] * rr[j, b] - rr[i, b] * ri[j, b]
-        for b in range(nb):
-            for i in range(p):
-                for j in range(i, p):
-                    out[b, band, i, j] = sr[i, j, b] + 1j * si[i, j, b]
-                    if j > i:
-                        out[b, band, j, i] = sr[i, j, b] - 1j * si[i, j, b]
+            _finish_residual(rr, ri, Er, Ei, Lr, Li, coef, k)   # R = E - (C u) - lines . coef
+            _accumulate(sr, si, rr, ri)                          # P_b += R_k R_k^H
+        _store_band(out, sr, si, band)
 
 
 @njit(cache=True, nogil=True)
