@@ -41,7 +41,9 @@ class CaseSpec:
     """Everything a foreign recording is made of (SI units).
 
     kind: the case kind (see KINDS); truth: 'reduced' or 'full'; n_bending: bending pairs
-    kept in a reduced truth; speed_rpm: the nominal speed written in the sidecar;
+    kept in a reduced truth; static_correction: a reduced truth keeps the quasi-static
+    deflection of the modes it leaves out (mode-acceleration method); speed_rpm: the
+    nominal speed written in the sidecar;
     speed_rpm_true: the speed the rotor really runs at (gyroscopics, unbalance, runout);
     k_theta: ks reduction per axis (-); c_nsm: added damping per axis (N s/m); effects;
     habits; dt (s), duration_s (s, recorded part); controller_file: path of the controller
@@ -51,6 +53,7 @@ class CaseSpec:
     kind: str = "control"
     truth: str = "reduced"
     n_bending: int = 0
+    static_correction: bool = False
     speed_rpm: float = 31500.0
     speed_rpm_true: float = 31500.0
     k_theta: dict[str, float] = field(default_factory=lambda: dict.fromkeys(AXES, 0.0))
@@ -94,7 +97,8 @@ def _controller(spec: CaseSpec, controller: Controller | str | os.PathLike | Non
 def plant_of(spec: CaseSpec, rig: Rig, effects: tuple[Effect, ...] | None = None,
              truth: str | None = None):
     """The continuous plant of a case (optionally with other effects or another truth)."""
-    R = rotor(rig, spec.speed_rpm_true, truth or spec.truth, spec.n_bending)
+    R = rotor(rig, spec.speed_rpm_true, truth or spec.truth, spec.n_bending,
+              spec.static_correction)
     R = bearing_changes(R, rig, spec.k_theta, spec.c_nsm)
     return build_plant(R, rig, spec.effects if effects is None else effects,
                        spec.speed_rpm_true, spec.k_theta)
@@ -142,7 +146,8 @@ def concealment(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
     nominal family without effects); ``base`` a precomputed 'without' response.
     """
     if base is None:
-        base = clean_response(replace(spec, truth="reduced", n_bending=0), ctrl, eta, rig, ())
+        base = clean_response(replace(spec, truth="reduced", n_bending=0,
+                                      static_correction=False), ctrl, eta, rig, ())
     y = clean_response(spec, ctrl, eta, rig, effects, truth)
     return float(np.sqrt(np.mean((y - base) ** 2)) / spec.habits.noise_rms_m)
 
@@ -252,11 +257,12 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
     flexible modes of a full or bending truth ('flexible', never changed)."""
     n = round(spec.duration_s / spec.dt)
     eta = spec.habits.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
-    base = clean_response(replace(spec, truth="reduced", n_bending=0, effects=()), ctrl, eta,
+    base = clean_response(replace(spec, truth="reduced", n_bending=0, static_correction=False,
+                                  effects=()), ctrl, eta,
                           rig, ())
     out: dict[str, float] = {}
     effects = list(spec.effects)
-    ref = replace(spec, truth="reduced", n_bending=0)
+    ref = replace(spec, truth="reduced", n_bending=0, static_correction=False)
 
     def conc(e: Effect) -> float:
         c = concealment(ref, ctrl, eta, rig, (e,), base=base)
@@ -280,7 +286,7 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
         effects[i] = e
         out[f"{i}:{e.name}"] = c
     spec = replace(spec, effects=tuple(effects))
-    if spec.truth == "full" or spec.n_bending:
+    if spec.truth == "full" or spec.n_bending or spec.static_correction:
         out["flexible"] = concealment(spec, ctrl, eta, rig, (), base=base)
     out["all"] = concealment(spec, ctrl, eta, rig, spec.effects, base=base)
     return spec, out
@@ -294,6 +300,7 @@ def truth_record(spec: CaseSpec, rig: Rig, concealments: dict[str, float],
         "kind": spec.kind,
         "truth": spec.truth,
         "n_bending": spec.n_bending,
+        "static_correction": spec.static_correction,
         "speed_rpm": spec.speed_rpm,
         "speed_rpm_true": spec.speed_rpm_true,
         "dt": spec.dt,
@@ -318,7 +325,8 @@ def write_case(spec: CaseSpec, out_dir: str | os.PathLike, name: str,
     rig = load_rig()
     ctrl = _controller(spec, controller)
     conc: dict[str, float] = {}
-    if conceal_effects and (spec.effects or spec.truth == "full" or spec.n_bending):
+    if conceal_effects and (spec.effects or spec.truth == "full" or spec.n_bending
+                            or spec.static_correction):
         spec, conc = conceal(spec, ctrl, rng, rig)
     sim = simulate(spec, ctrl, rng, rig)
     truth = truth_record(spec, rig, conc, sim.draws)

@@ -96,7 +96,9 @@ def _channels(where: str) -> list[int]:
 
 @dataclass(frozen=True)
 class ContinuousPlant:
-    """x' = A x + B w, y_s = C x. A (n, n) 1/s, B (n, 4) per A, C (4, n) in m;
+    """x' = A x + B w, y_s = C x + D w(t-). A (n, n) 1/s, B (n, 4) per A, C (4, n) in m,
+    D (4, 4) m/A or None: a static feedthrough (the static correction of a reduced truth),
+    of the current in force just before the sampling instant (it jumps at the switch);
     ``x0`` (n,) the state at time 0 (rotor at rest, oscillator at angle 0);
     ``delay_s`` the actuator-side plus sensor-side delay (s), ``sensor_delay_s`` the latter
     alone; ``n_rotor`` rotor states; ``omega`` the true spin (rad/s) and ``osc`` the index of
@@ -111,6 +113,7 @@ class ContinuousPlant:
     sensor_delay_s: float = 0.0
     omega: float = 0.0
     osc: int = -1
+    D: NDArray | None = None
 
     def state_at(self, t: float) -> NDArray:
         """x0 with the oscillator turned to time t (s; the rotor at rest): the state a
@@ -239,6 +242,15 @@ def build_plant(R: RotorBlock, rig: Rig, effects: tuple[Effect, ...] | list[Effe
             A[vi, :] += -rig.ki / m * cur_row[ch]
             B[vi, ch] += -rig.ki / m * cur_dir[ch]
             y_row[ch, zi] -= 1.0                       # probe on the housing
+    # the left-out modes' quasi-static deflection (static correction) under the AMB forces
+    y_dir = np.zeros((4, 4))
+    if R.residual is not None:
+        for ch, ax in enumerate(AXES):
+            js = dof(rig.sensor_nodes[ax[0]], ax[1])
+            for b, bx in enumerate(AXES):
+                r = R.residual[js, dof(rig.bearing_nodes[bx[0]], bx[1])] * rig.ki
+                y_row[ch] += r * cur_row[b]
+                y_dir[ch, b] += r * cur_dir[b]
     if lines:
         om = float(speed_rpm_true) * np.pi / 30.0
         o = S["osc"]
@@ -258,19 +270,22 @@ def build_plant(R: RotorBlock, rig: Rig, effects: tuple[Effect, ...] | list[Effe
             a, ph = e.params["amplitude_m"], e.params["phase_rad"]
             y_row[ch, o] += a * np.array([np.cos(ph), -np.sin(ph)])
     # probe dynamics in cascade, then probe gain
+    D = np.zeros((4, 4))
     for ch in range(4):
-        row = y_row[ch]
+        row, drow = y_row[ch], y_dir[ch]
         for j, wb in enumerate(sens_bw[ch]):
             s = S[f"sen{ch}.{j}"].start
             A[s, s] = -wb
             A[s, :] += wb * row
-            row = np.zeros(n)
+            B[s, :] += wb * drow
+            row, drow = np.zeros(n), np.zeros(4)
             row[s] = 1.0
-        C[ch] = gain_s[ch] * row
+        C[ch], D[ch] = gain_s[ch] * row, gain_s[ch] * drow
     d_s = sum(e.params["delay_s"] for e in eff.get("sensor_delay", []))
     d_a = sum(e.params["delay_s"] for e in eff.get("actuator_delay", []))
     return ContinuousPlant(A=A, B=B, C=C, x0=x0, delay_s=float(d_a + d_s), n_rotor=R.n,
                            sensor_delay_s=float(d_s),
                            omega=float(speed_rpm_true) * np.pi / 30.0,
-                           osc=S["osc"].start if lines else -1)
+                           osc=S["osc"].start if lines else -1,
+                           D=D if np.any(D) else None)
 

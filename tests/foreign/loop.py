@@ -13,9 +13,10 @@ be the state at the instant the k-th sample is taken. Over [t_k - tau_s, t_{k+1}
 the applied current is w[k-n-1] for the first f dt and w[k-n] for the rest, so exactly
 
     z[k+1] = e^{A dt} z[k] + e^{A (1-f) dt} Gam(f dt) w[k-n-1] + Gam((1-f) dt) w[k-n],
-    Gam(s) = int_0^s e^{A r} dr B,      y_m[k] = C z[k] + m[k]
+    Gam(s) = int_0^s e^{A r} dr B,      y_m[k] = C z[k] + D w[k-n-1] + m[k]
 
-(m: noise, offsets, drift, lines, r1; added by the sampler). With tau = 0 this is the plain
+(m: noise, offsets, drift, lines, r1; added by the sampler; D a static feedthrough, of the
+current in force just before the sampling instant, w[k-n-1]). With tau = 0 this is the plain
 ZOH. Plant, controller and a delay line of w form one discrete LTI system, built once and
 run by a plain recursion.
 """
@@ -129,10 +130,13 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     nl = 4 * (n_shift + 1)
     nx = np_ + nk + nl
     iz, ik = slice(0, np_), slice(np_, np_ + nk)
+    line = [slice(np_ + nk + 4 * i, np_ + nk + 4 * (i + 1)) for i in range(n_shift + 1)]
     C = plant.C
     # y_m = C z + m ;  w = Cu xk + Duy y_m + Due eta + w_add
     Cy = np.zeros((4, nx))
     Cy[:, iz] = C
+    if plant.D is not None:      # the current in force just before the sampling instant
+        Cy[:, line[n_shift]] += plant.D
     Dy = np.zeros((4, 12))
     Dy[:, 8:] = np.eye(4)
     Cw = ctrl.Duy @ Cy
@@ -143,7 +147,6 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     A = np.zeros((nx, nx))
     Bm = np.zeros((nx, 12))
     A[iz, iz] = Phi
-    line = [slice(np_ + nk + 4 * i, np_ + nk + 4 * (i + 1)) for i in range(n_shift + 1)]
     # w[k-n] and w[k-n-1] in terms of X and e
     for coef, lag in ((Gnew, n_shift), (Gold, n_shift + 1)):
         if lag == 0:

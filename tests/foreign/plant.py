@@ -58,7 +58,9 @@ def node_of(rig: Rig, where: str) -> int:
 class RotorBlock:
     """A rotor in state-space form. A (n, n) in 1/s; ``force`` (n, n_q) maps a force vector
     in N on all DOFs to x'; ``disp`` and ``vel`` (n_q, n) give all DOF displacements (m) and
-    velocities (m/s) from the state. Full: n = 2 n_q; reduced: n = 8 + 4 n_bending."""
+    velocities (m/s) from the state. Full: n = 2 n_q; reduced: n = 8 + 4 n_bending.
+    ``residual`` (n_q, n_q), m/N, or None: the quasi-static deflection at every DOF per
+    force at every DOF of the modes a reduced block leaves out (its static correction)."""
 
     A: NDArray
     force: NDArray
@@ -66,6 +68,7 @@ class RotorBlock:
     vel: NDArray
     truth: str
     speed_rpm: float
+    residual: NDArray | None = None
 
     @property
     def n(self) -> int:
@@ -76,7 +79,8 @@ class RotorBlock:
         """A new block with an extra force -k q_in (or -k q'_in) at dof_out (k in N/m or N s/m)."""
         src = self.vel if velocity else self.disp
         A = self.A - k * np.outer(self.force[:, dof_out], src[dof_in])
-        return RotorBlock(A, self.force, self.disp, self.vel, self.truth, self.speed_rpm)
+        return RotorBlock(A, self.force, self.disp, self.vel, self.truth, self.speed_rpm,
+                          self.residual)
 
 
 def full_rotor(rig: Rig, speed_rpm: float) -> RotorBlock:
@@ -98,13 +102,21 @@ def full_rotor(rig: Rig, speed_rpm: float) -> RotorBlock:
     return RotorBlock(A, force, disp, vel, "full", float(speed_rpm))
 
 
-def modal_truncation(block: RotorBlock, n_bending: int = 0) -> RotorBlock:
+def modal_truncation(block: RotorBlock, n_bending: int = 0, static: bool = False
+                     ) -> RotorBlock:
     """Keep the 8 + 4 n_bending eigenvalues of smallest modulus of a full block.
 
     T_R is a real basis of the kept right invariant subspace (Re v, Im v of each pair); the
     oblique projector P = V W^T onto it along the left-out modes (w^T v = 1) is real, and
     T_L = pinv(T_R) P, so that T_L T_R = I and T_L kills the left-out modes. The reduced
     block is (T_L A T_R, T_L force, disp T_R, vel T_R).
+
+    ``static``: also keep the static correction of the left-out modes (mode-acceleration
+    method). Far below their own frequencies they follow the force quasi-statically, so
+    they add ``residual`` = (static compliance of the full block) - (that of the kept
+    modes) to the displacements: disp (-A^-1) force - disp T_R (-A_r^-1) T_L force. (The
+    same as disp (-A^-1)(I - P) force, but without the eigenvectors of all the left-out
+    modes, which carry ~1e-8 relative errors into this small difference.)
     """
     lam, vl, vr = sla.eig(block.A, left=True, right=True)
     order = np.argsort(np.abs(lam), kind="stable")
@@ -134,8 +146,13 @@ def modal_truncation(block: RotorBlock, n_bending: int = 0) -> RotorBlock:
     T_R = T_R / np.linalg.norm(T_R, axis=0)
     T_L = np.linalg.pinv(T_R) @ P
     T_L = np.linalg.solve(T_L @ T_R, T_L)
-    return RotorBlock(T_L @ block.A @ T_R, T_L @ block.force, block.disp @ T_R,
-                      block.vel @ T_R, f"reduced+{n_bending}", block.speed_rpm)
+    A_r, force_r, disp_r = T_L @ block.A @ T_R, T_L @ block.force, block.disp @ T_R
+    residual = None
+    if static:
+        residual = (block.disp @ np.linalg.solve(-block.A, block.force)
+                    - disp_r @ np.linalg.solve(-A_r, force_r))
+    return RotorBlock(A_r, force_r, disp_r, block.vel @ T_R, f"reduced+{n_bending}",
+                      block.speed_rpm, residual)
 
 
 def bearing_changes(block: RotorBlock, rig: Rig, k_theta: dict[str, float],
@@ -163,16 +180,19 @@ def bearing_changes(block: RotorBlock, rig: Rig, k_theta: dict[str, float],
 _CACHE: dict[tuple, RotorBlock] = {}
 
 
-def rotor(rig: Rig, speed_rpm: float, truth: str = "reduced", n_bending: int = 0
-          ) -> RotorBlock:
-    """Nominal rotor block: ``truth`` 'full' (2 n_q states) or 'reduced' (8 + 4 n_bending).
+def rotor(rig: Rig, speed_rpm: float, truth: str = "reduced", n_bending: int = 0,
+          static: bool = False) -> RotorBlock:
+    """Nominal rotor block: ``truth`` 'full' (2 n_q states) or 'reduced' (8 + 4 n_bending,
+    with the static correction of the left-out modes if ``static``).
 
-    Blocks are cached per (rig, speed, truth, n_bending); they are immutable.
+    Blocks are cached per (rig, speed, truth, n_bending, static); they are immutable.
     """
     if truth not in ("full", "reduced"):
         raise ValueError(f"truth must be 'full' or 'reduced', got {truth!r}")
-    key = (repr(rig.to_dict()), float(speed_rpm), truth, n_bending if truth == "reduced" else 0)
+    reduced = truth == "reduced"
+    key = (repr(rig.to_dict()), float(speed_rpm), truth, n_bending if reduced else 0,
+           static and reduced)
     if key not in _CACHE:
         full = full_rotor(rig, speed_rpm)
-        _CACHE[key] = full if truth == "full" else modal_truncation(full, n_bending)
+        _CACHE[key] = full if not reduced else modal_truncation(full, n_bending, static)
     return _CACHE[key]
