@@ -21,7 +21,13 @@ from bayes_amb.discrepancy.checks import run_checks
 from bayes_amb.discrepancy.fitting import _embed, extend, fit_nominal
 from bayes_amb.discrepancy.gauss_newton import band_moments
 from bayes_amb.discrepancy.library import make_candidate
-from bayes_amb.discrepancy.prescreen import PRUNE_MARGIN, LinearScreen, column_norms
+from bayes_amb.discrepancy.family import largest_gain, member_bound, virtual_planes
+from bayes_amb.discrepancy.prescreen import (
+    PRUNE_MARGIN,
+    LinearScreen,
+    column_norms,
+    linear_screen,
+)
 from bayes_amb.discrepancy.select import (
     SelectOptions,
     _own_columns,
@@ -220,3 +226,78 @@ def test_a_line_is_refined_from_the_start_with_the_larger_bayes_factor(nominal, 
     assert kept.log_bf == pytest.approx(best.log_bf, abs=1e-6)
     gap = abs(both[0].log_post - both[1].log_post)
     assert len(calls) == (1 if gap > sel.START_OCCAM_TOL else 2)
+
+
+# --- the unbalance scan bounded by one screen (discrepancy/family.py) ------------------
+
+def _scan(step: int = 3):
+    """Unbalance at every ``step``-th shaft node and at the discs."""
+    n = load_rig().n_nodes
+    return [make_candidate(f"unbalance@n{j}") for j in range(1, n + 1, step)] + [
+        make_candidate("unbalance@D1"), make_candidate("unbalance@D2")]
+
+
+def _exact_gain(parent, cand):
+    fwd, _, post = extend(parent, cand)
+    lin = linear_screen(post, _embed(parent, fwd), _own_columns(fwd), parent.log_post,
+                        exact=True)
+    return lin.gain
+
+
+def test_every_node_is_a_combination_of_the_virtual_planes(nominal):
+    """The planes span T_L Bf of every node (to rounding): the bound's premise."""
+    fwd = nominal.forward
+    T_L, n_q = fwd.base.T_L, fwd.ctx.rig.n_nodes * 4
+
+    def stacked(c):
+        Bf = T_L @ c.line_force(fwd.ctx)
+        return np.concatenate([Bf[:, 0], Bf[:, 1]])
+
+    planes = virtual_planes(T_L, fwd.ctx)
+    P = np.stack([stacked(p) for p in planes], axis=1)
+    assert 2 <= len(planes) <= 2 * T_L.shape[0] < n_q // 8, len(planes)
+    for c in _scan(1):
+        v = stacked(c)
+        coef = np.linalg.lstsq(P, v, rcond=None)[0]
+        assert np.linalg.norm(P @ coef - v) < 1e-11 * np.linalg.norm(v), c.key
+
+
+def test_the_family_bound_covers_every_node(nominal):
+    """With the unbalance at D2 in the record, no node's exact screen exceeds its bound,
+    and the bound is informative: D2 itself lies in the span, so its screen comes within
+    its own prior terms (~8 nats at most; measured 0.3) of the bound."""
+    planes = virtual_planes(nominal.forward.base.T_L, nominal.forward.ctx)
+    max_dl = largest_gain(nominal, planes)
+    gains = {c.key: (_exact_gain(nominal, c), member_bound(max_dl, c, nominal.forward.ctx))
+             for c in _scan(4)}
+    for key, (g, b) in gains.items():
+        assert g <= b + 1e-6, (key, g, b)
+    g, b = gains["unbalance@D2"]
+    assert g > SCREEN_MIN and b - g < 3.0, (g, b)
+
+
+@pytest.fixture(scope="module")
+def nominal_no_line():
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    cfg = SimulationConfig(
+        truth="reduced", params={"k_By": 0.3}, dt=1e-4, duration=0.5, seed=6,
+        noise_rms=2e-7, r1_rms=1e-7, r2_rms=0.02,
+        effects=(parse_effect("sensor_gain:gain=0.05,channel=By"),))
+    rec, _ = simulate_recording(rig, ctrl, cfg)
+    fwd = ForwardModel(rec, NAMES)
+    A, _, _ = fwd.excitation_system(np.zeros((1, len(NAMES))))
+    checks = run_checks(rec, np.linalg.eigvals(A[0]))
+    eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
+    return fit_nominal(rec, NAMES, eps, start=checks.start)
+
+
+def test_a_node_scan_without_a_line_costs_one_screen(nominal_no_line):
+    """No line in the record: the whole scan is bounded below the bar at once (how =
+    'family'), each node reported with a bound at or above its own exact screen."""
+    pool = _scan(3)
+    screens = screen_round(nominal_no_line, pool, SelectOptions(candidates=()))
+    assert [s.how for s in screens] == ["family"] * len(pool)
+    for s in screens[::3]:
+        assert s.gain < SCREEN_MIN - PRUNE_MARGIN
+        assert _exact_gain(nominal_no_line, s.candidate) <= s.gain + 1e-6, s.candidate.key

@@ -416,7 +416,8 @@ def _candidate_table(cands: list[dict[str, Any]]) -> Table:
             c = by_round.get(r)
             row += ["", ""] if c is None else [
                 g(c["screen_gain"], 3)
-                + (" (predicted)" if c.get("screen") in ("pruned", "outranked") else ""),
+                + {"pruned": " (predicted)", "outranked": " (predicted)",
+                   "family": " (bound)"}.get(c.get("screen"), ""),
                 g(c["log_bayes_factor"], 3)]
         rows.append(row)
     return Table("Every candidate tried", header, rows,
