@@ -18,10 +18,10 @@ import pytest
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import all_candidates
 from bayes_amb.discrepancy.checks import run_checks
+from bayes_amb.discrepancy.family import largest_gain, member_bound, virtual_planes
 from bayes_amb.discrepancy.fitting import _embed, extend, fit_nominal
 from bayes_amb.discrepancy.gauss_newton import band_moments
 from bayes_amb.discrepancy.library import make_candidate
-from bayes_amb.discrepancy.family import largest_gain, member_bound, virtual_planes
 from bayes_amb.discrepancy.prescreen import (
     PRUNE_MARGIN,
     LinearScreen,

@@ -124,7 +124,8 @@ class Screen:
     candidate the residual is affine in: the same optimum), 'pruned' or 'outranked' (the
     linear screen's prediction, below the bar or below the round's best: not fitted; see
     prescreen.py), 'family' (an unbalance location whose bound from the one screen of the
-    whole scan is below the bar: not fitted, the gain is the bound; see family.py). linear_gain: the linear screen's prediction (None where it was not run).
+    whole scan is below the bar: not fitted, the gain is the bound; see family.py).
+    linear_gain: the linear screen's prediction (None where it was not run).
     """
 
     candidate: Candidate
