@@ -1,6 +1,8 @@
 """Compiled (numba) building blocks of the modal form (bayes_amb.inference.eigen): Householder
 reduction to Hessenberg form across a batch, the Francis double-shift QR iteration for the
-eigenvalues, and inverse iteration for the eigenvectors (one vector, or one eigenvalue of
+eigenvalues of one matrix (the reference the lock-step iteration of
+bayes_amb.inference.qr_lanes, which the modal form runs, reproduces bit for bit), and inverse
+iteration for the eigenvectors (one vector, or one eigenvalue of
 every member of a batch at once).
 
 References: Wilkinson and Reinsch, Handbook for Automatic Computation II (1971), procedures

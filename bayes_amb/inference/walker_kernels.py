@@ -22,6 +22,7 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from bayes_amb.inference.block_sums import N_IN, N_OUT, _band_sums_blocks4, _pack_blocks
 from bayes_amb.inference.kernels import lines_or_empty
 
 LANES_MIN_BATCH = 12
@@ -171,6 +172,11 @@ def _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts
         for j in range(nl):
             coef_t[j, b] = coef[b, j]
     M, B2, C2, x2 = _real_blocks(lam, Bm, Cm, xi, inv_scale)
+    if M.shape[0] > 0 and m == N_IN and p == N_OUT:   # written out (block_sums)
+        _band_sums_blocks4(_pack_blocks(M, B2, C2, x2), nb, X.real.copy(), X.imag.copy(),
+                           z.real.copy(), z.imag.copy(), E.real.copy(), E.imag.copy(),
+                           lines.real.copy(), lines.imag.copy(), coef_t, starts, counts, out)
+        return
     if M.shape[0] > 0 or ns == 0:
         _band_sums_pairs(M, B2, C2, x2, X.real.copy(), X.imag.copy(), z.real.copy(),
                          z.imag.copy(), E.real.copy(), E.imag.copy(), lines.real.copy(),
