@@ -26,7 +26,7 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import ActuatorLag, Unbalance
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference import block_sums, kernels, walker_kernels
+from bayes_amb.inference import band_algebra, block_sums, kernels, walker_kernels
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.whittle import WhittleLikelihood, _logdet_and_trace
@@ -319,15 +319,17 @@ def test_written_out_block_kernel_is_the_pairs_kernel_bit_for_bit(rec):
         out = np.empty((len(idx), like.starts.size, 4, 4), dtype=complex)
         if kernel == "pairs":
             walker_kernels._band_sums_pairs(M, B2, C2, x2, *data, out)
-        else:
-            block_sums._band_sums_blocks4(block_sums._pack_blocks(M, B2, C2, x2), len(idx),
-                                          *data, out)
-        return out
+            return out
+        packed = np.empty((len(idx) if kernel == "packed" else 0,
+                           -(-like.starts.size // band_algebra.FB), 16, band_algebra.FB))
+        block_sums._band_sums_blocks4(block_sums._pack_blocks(M, B2, C2, x2), len(idx),
+                                      *data, out, packed)
+        return band_algebra.unpack_band_sums(packed, like.starts.size) if packed.size else out
 
     every = np.arange(nb)
     ref = run(every, "pairs")
-    new = run(every, "blocks")
-    assert np.array_equal(new, ref)
+    assert np.array_equal(run(every, "blocks"), ref)
+    assert np.array_equal(run(every, "packed"), ref)   # the packed form holds the same
     some = np.array([nb - 1, 3, 0, 17])                 # other neighbours, other lanes
     assert np.array_equal(run(some, "blocks"), ref[some])
 
@@ -352,3 +354,35 @@ def test_fused_rows_do_not_depend_on_the_batch(rec):
     back[order] = second
     assert np.array_equal(back[:20], first)
     assert np.all(np.isfinite(first))
+
+
+def test_written_out_band_algebra_is_the_loops_bit_for_bit():
+    """band_algebra._whittle_terms4 (the 4 x 4 algebra written out, bands in chunks of FB)
+    computes walker_kernels._whittle_terms' operations in its order: the same log det,
+    trace and flags exactly, for more bands than a chunk, a band that is not positive
+    definite and bands whose determinant leaves the range of its product."""
+    rng = np.random.default_rng(13)
+    nb, nbands, n = 5, 2 * band_algebra.FB + 7, 4
+    def hermitian(*shape):
+        A = rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+        H = A @ np.conj(np.swapaxes(A, -1, -2))
+        return 0.5 * (H + np.conj(np.swapaxes(H, -1, -2)))
+
+    ps = hermitian(3, nbands, n, 2 * n)
+    ps[1, 3] = -np.eye(n)                               # with sig2 large: not positive definite
+    P = hermitian(nb, nbands, n, 3 * n)
+    sig2 = 10.0 ** rng.uniform(-2, 1, (nb, 3))
+    sig2[0, 1] = 1e3
+    sig2[1] = 1e-100                                    # det ~ 1e-400: log of the pivots
+    sig2[2] = 1e100                                     # det ~ 1e400
+    ref = [np.empty((nb, nbands)), np.empty((nb, nbands)), np.empty((nb, nbands), bool)]
+    walker_kernels._whittle_terms(sig2, ps, 2.5, P, *ref)
+    new = [np.empty((nb, nbands)), np.empty((nb, nbands)), np.empty((nb, nbands), bool)]
+    band_algebra._whittle_terms4(sig2, band_algebra.pack_band_sources(ps), 2.5,
+                                 band_algebra._pack_band_sums(P), *new)
+    assert not ref[2][0, 3] and ref[2].sum() == ref[2].size - 1
+    assert np.all(np.isfinite(ref[0])) and np.abs(ref[0][1:3]).min() > 600
+    for r, x in zip(ref, new, strict=True):
+        assert np.array_equal(r, x)
+    assert np.array_equal(band_algebra.unpack_band_sums(band_algebra._pack_band_sums(P),
+                                                        nbands), P)

@@ -18,6 +18,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from bayes_amb.inference.band_algebra import ROW
+
 N_IN = 4
 """Inputs (excitation channels) the written-out kernel is for."""
 N_OUT = 4
@@ -56,11 +58,15 @@ def _pack_blocks(M, B2, C2, x2):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
-def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, counts, out):
-    # pragma: no cover - compiled
+def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, counts, out,
+                       packed):  # pragma: no cover - compiled
     # _band_sums_pairs for 4 inputs and 4 outputs, D from _pack_blocks, nb walkers; per bin
     # and block w = B2 X_k - z_k x2, u = (z_k I - M)^-1 w, R -= C2 u, then R = E - (C u) -
-    # lines . coef and P_b += R R^H: the operations of _band_sums_pairs, in its order
+    # lines . coef and P_b += R R^H: the operations of _band_sums_pairs, in its order. P_b
+    # into out (nb, nbands, 4, 4) complex or, where packed is not empty, into packed (nb,
+    # chunks, 16, FB) as band_algebra's kernel reads it (its lower triangle: the real and
+    # imaginary parts of the conjugates of the upper triangle's sums)
+    fb = packed.shape[3]
     nch, nsl = D.shape[0], D.shape[1]
     nl = coef.shape[0]
     p = N_OUT
@@ -150,6 +156,15 @@ def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, coun
                         for b in range(w):
                             sr[i, j, b] += acc[i, b] * acc[j, b] + acc[p + i, b] * acc[p + j, b]
                             si[i, j, b] += acc[p + i, b] * acc[j, b] - acc[i, b] * acc[p + j, b]
+            if packed.shape[0] > 0:
+                c, f = band // fb, band % fb
+                for b in range(w):
+                    for i in range(p):
+                        packed[b0 + b, c, ROW[i][i], f] = sr[i, i, b]
+                        for j in range(i):
+                            packed[b0 + b, c, ROW[i][j], f] = sr[j, i, b]
+                            packed[b0 + b, c, ROW[i][j] + 1, f] = -si[j, i, b]
+                continue
             for b in range(w):                      # the Hermitian P_b into out
                 for i in range(p):
                     for j in range(i, p):
