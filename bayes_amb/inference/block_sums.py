@@ -10,7 +10,9 @@ those of ``_band_sums_pairs``; tests/test_kernels.py checks it), about 30 % fewe
 instructions. The walker-dependent data of a block are packed into one array D (block,
 row, walker): with few arrays in the loop numba's compiler vectorises it across the
 walkers; with the eight separate arrays it does not (the checks that they do not overlap
-would be too many).
+would be too many). The batch is taken in chunks of at most LANES walkers, so that the
+running sums have a shape known to the compiler (their rows at fixed distances, which it
+needs as well).
 """
 
 from __future__ import annotations
@@ -18,16 +20,12 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from bayes_amb.inference.band_algebra import ROW
+from bayes_amb.inference.band_algebra import LANES, ROW
 
 N_IN = 4
 """Inputs (excitation channels) the written-out kernel is for."""
 N_OUT = 4
 """Outputs (residual channels) the written-out kernel is for."""
-LANES = 32
-"""Walkers per pass: the batch is taken in chunks of at most LANES walkers, so that the
-kernel's running sums have a shape known to the compiler (their rows at fixed distances,
-which it needs to vectorise the loop)."""
 _ROWS = 2 + 2 * N_IN + 4 + 2 * N_OUT
 
 
@@ -63,10 +61,9 @@ def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, coun
     # _band_sums_pairs for 4 inputs and 4 outputs, D from _pack_blocks, nb walkers; per bin
     # and block w = B2 X_k - z_k x2, u = (z_k I - M)^-1 w, R -= C2 u, then R = E - (C u) -
     # lines . coef and P_b += R R^H: the operations of _band_sums_pairs, in its order. P_b
-    # into out (nb, nbands, 4, 4) complex or, where packed is not empty, into packed (nb,
-    # chunks, 16, FB) as band_algebra's kernel reads it (its lower triangle: the real and
-    # imaginary parts of the conjugates of the upper triangle's sums)
-    fb = packed.shape[3]
+    # into out (nb, nbands, 4, 4) complex or, where packed is not empty, into packed
+    # (chunks, nbands, 16, LANES) as band_algebra's kernel reads it (the lower triangle:
+    # real and imaginary parts of the conjugates of the upper triangle's sums)
     nch, nsl = D.shape[0], D.shape[1]
     nl = coef.shape[0]
     p = N_OUT
@@ -156,14 +153,16 @@ def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, coun
                         for b in range(w):
                             sr[i, j, b] += acc[i, b] * acc[j, b] + acc[p + i, b] * acc[p + j, b]
                             si[i, j, b] += acc[p + i, b] * acc[j, b] - acc[i, b] * acc[p + j, b]
-            if packed.shape[0] > 0:
-                c, f = band // fb, band % fb
-                for b in range(w):
-                    for i in range(p):
-                        packed[b0 + b, c, ROW[i][i], f] = sr[i, i, b]
-                        for j in range(i):
-                            packed[b0 + b, c, ROW[i][j], f] = sr[j, i, b]
-                            packed[b0 + b, c, ROW[i][j] + 1, f] = -si[j, i, b]
+            if packed.shape[0] > 0:                 # the lower triangle, packed
+                for i in range(p):
+                    r = ROW[i][i]
+                    for b in range(w):
+                        packed[ch, band, r, b] = sr[i, i, b]
+                    for j in range(i):
+                        r = ROW[i][j]
+                        for b in range(w):
+                            packed[ch, band, r, b] = sr[j, i, b]
+                            packed[ch, band, r + 1, b] = -si[j, i, b]
                 continue
             for b in range(w):                      # the Hermitian P_b into out
                 for i in range(p):

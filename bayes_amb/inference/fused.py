@@ -22,7 +22,14 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
-from bayes_amb.inference.band_algebra import FB, N_CH, N_SRC, _whittle_terms4, pack_band_sources
+from bayes_amb.inference.band_algebra import (
+    LANES,
+    N_CH,
+    N_SRC,
+    _whittle_terms4,
+    n_chunks,
+    pack_band_sources,
+)
 from bayes_amb.inference.batched import _zoh
 from bayes_amb.inference.eigen import _final_state_batch, _modal_batch
 from bayes_amb.inference.loop_model import _error_form
@@ -144,8 +151,7 @@ class FusedLikelihood:
         n_src, nbands, p = like.phi_sources.shape[:3]
         self.packs = p == N_CH and n_src == N_SRC          # band_algebra's kernel applies
         self.packed_sources = (pack_band_sources(self.phi_sources) if self.packs
-                               else np.zeros((0, n_src, 16, FB)))
-        self.n_chunks = (nbands + FB - 1) // FB
+                               else np.zeros((nbands, n_src, 16)))
         self.n = float(like.n)
         self.lines = np.zeros((like.E.shape[0], like.E.shape[1], 0), dtype=c128)
         self.n_bands = like.starts.size
@@ -160,12 +166,12 @@ class FusedLikelihood:
                  ) -> tuple[NDArray, NDArray | None, NDArray, NDArray | None] | None:
         """(log-likelihood per band (nb, n_bands), P_b (nb, n_bands, 4, 4), stable (nb,),
         P_b packed) for theta (nb, p) and sig2 (nb, 3), both C-contiguous float64: P_b in
-        one of the two forms, the other None (the packed one (nb, n_chunks, 16, FB) of
-        bayes_amb.inference.band_algebra where its kernel applies); None where a member
-        needs the staged path (its modal form by LAPACK)."""
+        one of the two forms, the other None (packed as bayes_amb.inference.band_algebra
+        reads them where its kernel applies); None where a member needs the staged path
+        (its modal form by LAPACK)."""
         nb = theta.shape[0]
         Pb = np.empty((nb, self.n_bands, 4, 4), dtype=np.complex128)
-        packed = np.empty((nb if self.packs else 0, self.n_chunks, 16, FB))
+        packed = np.empty((n_chunks(nb) if self.packs else 0, self.n_bands, 16, LANES))
         stable = np.empty(nb, dtype=np.bool_)
         ll = np.empty((nb, self.n_bands))
         done = _fused(theta, self.rep, *self.plant, self.dt, *self.loop, self.x, self.tol,

@@ -481,7 +481,7 @@ def whittle_terms(sig2: NDArray, phi_sources: NDArray, scale: float, P: NDArray
     P = np.ascontiguousarray(P, np.complex128)
     if P.shape[-1] == band_algebra.N_CH and phi_sources.shape[0] == band_algebra.N_SRC:
         band_algebra._whittle_terms4(sig2, band_algebra.pack_band_sources(phi_sources),
-                                     float(scale), band_algebra._pack_band_sums(P), logdet,
+                                     float(scale), band_algebra.pack_band_sums(P), logdet,
                                      quad, ok)          # written out, the same results
     else:
         _whittle_terms(sig2, phi_sources, float(scale), P, logdet, quad, ok)

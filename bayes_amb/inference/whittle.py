@@ -305,7 +305,7 @@ class WhittleLikelihood:
         if last is not None and last[0] == key:
             if last[1] is None:                     # the fused call left them packed
                 last = self._last_sums = (key, band_algebra.unpack_band_sums(
-                    last[3], self.n_bands), last[2], None)
+                    last[3], theta.shape[0]), last[2], None)
             return last[1], last[2]
         memo = getattr(self, "_row_sums", None)
         if memo is not None:
