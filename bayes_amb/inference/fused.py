@@ -6,9 +6,16 @@ S(theta), the modal form, the modal state after the record, the residual band su
 4 x 4 band algebra. Called one by one from Python they cost ~11 us per evaluation more than
 their arithmetic (argument checks, dispatch, conversions and temporary arrays between the
 stages). :func:`fused_log_likelihood` runs them all in one call, stage for stage the same
-compiled functions (bayes_amb.inference.batched, loop_model, eigen, walker_kernels), so its
-results are those of the staged path to rounding (the plant's matrix product is summed in
-a fixed order here, by BLAS there).
+compiled functions (bayes_amb.inference.batched, loop_model, eigen, walker_kernels,
+block_sums, band_algebra), so its results are those of the staged path to rounding (the
+plant's matrix product is summed in a fixed order here, by BLAS there). The band sums stay
+packed for the band algebra (bayes_amb.inference.band_algebra) and are unpacked only if
+the staged path asks for the remembered batch.
+
+Every stage computes each member from that member's data alone, with the same operations
+whatever the rest of the batch (the QR iteration runs the members in lock-step but each on
+its own windows; the vectorised loops run over the members), so a row's result does not
+depend on the batch it comes in (tests/test_kernels.py).
 
 It applies to the observer-form loop (``ForwardModel.fast``) of a plain
 :class:`~bayes_amb.inference.whittle.WhittleLikelihood` and batches of at least

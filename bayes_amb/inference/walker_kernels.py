@@ -8,12 +8,15 @@ modal form laid out (mode, ..., walker)). :func:`residual_band_sums_lanes` is th
 term for term the arithmetic of the walker-by-walker one (the same order of the sums, so
 the two agree to rounding and in practice bit for bit). It pays from about a dozen walkers
 (``LANES_MIN_BATCH``; emcee hands half the ensemble to the posterior at once); smaller
-batches keep the walker-by-walker kernel.
+batches keep the walker-by-walker kernel. With exactly conjugate pairs (the compiled modal
+form's) it runs on real 2 x 2 blocks, and for 4 inputs and 4 outputs on the written-out
+form of that kernel (bayes_amb.inference.block_sums; the same results bit for bit).
 
 :func:`whittle_terms` is the band algebra of the Whittle likelihood with the spectral
 densities formed in place: Phi_b = n sum_s sigma_s^2 Phi_{s,b}, its Cholesky factor, log det
 Phi_b and tr(Phi_b^-1 P_b), as ``whittle._logdet_and_trace`` computes them but with one
-logarithm per band (of the product of the pivots) instead of one per pivot.
+logarithm per band (of the product of the pivots) instead of one per pivot; for 4 channels
+and 3 noise sources written out (bayes_amb.inference.band_algebra; bit for bit the same).
 """
 
 from __future__ import annotations
