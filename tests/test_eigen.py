@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.linalg as sla
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.inference import kernels
@@ -25,7 +26,9 @@ from bayes_amb.inference.forward import (
     diagonalise,
     final_modal_state,
 )
+from bayes_amb.inference.hessenberg import _hqr
 from bayes_amb.inference.loop_model import error_form_compiled, error_form_matrices
+from bayes_amb.inference.qr_lanes import hqr_lanes
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 
@@ -97,6 +100,70 @@ def test_random_systems_with_real_and_complex_modes(n):
     assert np.all(new[ok] <= 4 * old[ok] + 1e3 * n * U), np.max(new[ok] / old[ok])
     n_real = (np.linalg.eigvals(A).imag == 0).sum()
     assert n_real > 0
+
+
+def _hqr_alone(H):
+    """EISPACK hqr on one Hessenberg matrix (member by member, as before the lock-step)."""
+    a = np.triu(H, -1).copy()
+    wr, wi = np.zeros(H.shape[0]), np.zeros(H.shape[0])
+    ok = _hqr(a, wr, wi)
+    return wr + 1j * wi, ok
+
+
+STALLS = np.array([[0.0, 1.0, 0.0], [1.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+"""hqr does not converge on this (nilpotent) matrix in 30 iterations."""
+
+
+@pytest.mark.parametrize("n", [1, 2, 3, 5, 8, 16, 24])
+def test_lock_step_qr_is_member_by_member_hqr_bit_for_bit(n):
+    """Each member's eigenvalues are those of hqr run on it alone, exactly, whatever else is
+    in the batch (members of other scales, a repeated eigenvalue, one that does not
+    converge, one not finite), and LAPACK's to rounding."""
+    rng = np.random.default_rng(10 + n)
+    H = np.triu(rng.standard_normal((37, n, n)), -1)
+    H[1::5] *= 1e4
+    H[2::5] *= 1e-3
+    H[3] = np.diag(np.full(n, 0.5))                  # a repeated eigenvalue (deflates at once)
+    H[4, 0, 0] = np.nan                              # not finite: not iterated
+    if n == 3:
+        H[5] = STALLS
+    lam, ok = hqr_lanes(H)
+    for b in range(37):
+        if b == 4:
+            assert not ok[b]
+            continue
+        ref, ok_ref = _hqr_alone(H[b])
+        assert ok[b] == ok_ref
+        if ok_ref:
+            assert np.array_equal(lam[b], ref)
+    assert ok.sum() == 35 if n == 3 else ok.sum() == 36
+    lam_r, ok_r = hqr_lanes(H[::-1])                 # other neighbours, other order
+    assert np.array_equal(lam_r[::-1][ok], lam[ok]) and np.array_equal(ok_r[::-1], ok)
+    alone = hqr_lanes(H[7:8])[0]
+    assert np.array_equal(alone[0], lam[7])
+    for b in np.flatnonzero(ok):
+        ref = np.linalg.eigvals(H[b])
+        scale = np.abs(H[b]).max()
+        assert np.allclose(np.sort_complex(lam[b]), np.sort_complex(ref), rtol=0,
+                           atol=1e-9 * scale)
+
+
+def test_lock_step_qr_on_the_likelihoods_matrices(forward):
+    """The benchmark's kind of matrix (S(theta) in error coordinates, 16 states) after
+    balancing and the Hessenberg reduction, as the modal form sees it; a member that does
+    not converge is reported so and leaves the others alone."""
+    A = forward.excitation_system(_thetas(20, np.random.default_rng(8)))[0]
+    H = np.stack([sla.hessenberg(a) for a in A])
+    H[6, :3, :3], H[6, 3:, :3] = STALLS, 0.0
+    H[6, :3, 3:] = 0.0
+    lam, ok = hqr_lanes(H)
+    assert not ok[6] and ok.sum() == 19
+    for b in np.flatnonzero(ok):
+        ref, ok_ref = _hqr_alone(H[b])
+        assert ok_ref and np.array_equal(lam[b], ref)
+        assert np.allclose(np.sort_complex(lam[b]), np.sort_complex(np.linalg.eigvals(A[b])),
+                           rtol=0, atol=1e-12)
+    assert not _hqr_alone(H[6])[1]
 
 
 def test_members_it_cannot_take_are_flagged_and_decomposed_by_lapack():

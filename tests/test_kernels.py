@@ -26,7 +26,7 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import ActuatorLag, Unbalance
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference import kernels, walker_kernels
+from bayes_amb.inference import band_algebra, block_sums, kernels, walker_kernels
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.whittle import WhittleLikelihood, _logdet_and_trace
@@ -294,3 +294,96 @@ def test_fused_call_gives_the_staged_paths_log_likelihood(rec):
     ok = np.isfinite(staged)
     assert np.array_equal(ok, np.isfinite(fused))
     assert np.all(np.abs(fused[ok] - staged[ok]) <= 1e-12 * np.abs(staged[ok]))
+
+
+def test_written_out_block_kernel_is_the_pairs_kernel_bit_for_bit(rec):
+    """block_sums (4 inputs, 4 outputs written out, walkers in chunks of LANES) computes
+    _band_sums_pairs' operations in its order: the same band sums exactly, with lines, for
+    a batch of more than one chunk, and each walker's independent of the others."""
+    rng = np.random.default_rng(11)
+    like, p = list(_likelihoods(rec))[1]                # the one with a line
+    P = np.vstack([_batch(p, rng) for _ in range(7)])[:block_sums.LANES + 13]
+    mb, xi = like.forward.modal(P, like.x_w)
+    lines, coef = like._line_terms(P)
+    assert lines is not None and lines.shape[2] > 0
+    nb = P.shape[0]
+
+    def run(idx, kernel):
+        M, B2, C2, x2 = walker_kernels._real_blocks(mb.lam[idx], mb.Bm[idx], mb.Cm[idx],
+                                                    xi[idx], 1.0 / like.scale)
+        assert M.shape[0] > 0
+        data = (like.X.real.copy(), like.X.imag.copy(), like.z.real.copy(),
+                like.z.imag.copy(), like.E.real.copy(), like.E.imag.copy(),
+                lines.real.copy(), lines.imag.copy(), np.ascontiguousarray(coef[idx].T),
+                like.starts, like.counts)
+        out = np.empty((len(idx), like.starts.size, 4, 4), dtype=complex)
+        if kernel == "pairs":
+            walker_kernels._band_sums_pairs(M, B2, C2, x2, *data, out)
+            return out
+        packed = np.empty((band_algebra.n_chunks(len(idx)) if kernel == "packed" else 0,
+                           like.starts.size, 16, band_algebra.LANES))
+        block_sums._band_sums_blocks4(block_sums._pack_blocks(M, B2, C2, x2), len(idx),
+                                      *data, out, packed)
+        return band_algebra.unpack_band_sums(packed, len(idx)) if packed.size else out
+
+    every = np.arange(nb)
+    ref = run(every, "pairs")
+    assert np.array_equal(run(every, "blocks"), ref)
+    assert np.array_equal(run(every, "packed"), ref)   # the packed form holds the same
+    some = np.array([nb - 1, 3, 0, 17])                 # other neighbours, other lanes
+    assert np.array_equal(run(some, "blocks"), ref[some])
+
+
+def test_fused_rows_do_not_depend_on_the_batch(rec):
+    """Each row's log likelihood on the fused path is a function of that row alone, bit for
+    bit: the same rows in another batch (other neighbours, other order, other size) give
+    the same values (the modal form, the QR iteration in lock-step, the band sums and the
+    band algebra all run per walker)."""
+    rng = np.random.default_rng(12)
+    like, p = next(_likelihoods(rec))
+    P = np.vstack([_batch(p, rng) for _ in range(8)])[:50]
+    ls = np.tile([np.log10(2e-8), -9.0, np.log10(0.02)], (50, 1))
+    ls[:, 0] += 0.1 * rng.standard_normal(50)
+    like._last_sums, like._fused = None, None
+    first = like.pointwise(P[:20], ls[:20])
+    assert like._fused is not None
+    order = rng.permutation(50)
+    like._last_sums = None
+    second = like.pointwise(P[order], ls[order])
+    back = np.empty_like(second)
+    back[order] = second
+    assert np.array_equal(back[:20], first)
+    assert np.all(np.isfinite(first))
+
+
+def test_written_out_band_algebra_is_the_loops_bit_for_bit():
+    """band_algebra._whittle_terms4 (the 4 x 4 algebra written out, vectorised across the
+    walkers in chunks of LANES) computes walker_kernels._whittle_terms' operations in its
+    order: the same log det, trace and flags exactly, for more walkers than a chunk, a band
+    that is not positive definite and bands whose determinant leaves the range of its
+    product."""
+    rng = np.random.default_rng(13)
+    nb, nbands, n = band_algebra.LANES + 5, 70, 4
+    def hermitian(*shape):
+        A = rng.standard_normal(shape) + 1j * rng.standard_normal(shape)
+        H = A @ np.conj(np.swapaxes(A, -1, -2))
+        return 0.5 * (H + np.conj(np.swapaxes(H, -1, -2)))
+
+    ps = hermitian(3, nbands, n, 2 * n)
+    ps[1, 3] = -np.eye(n)                               # with sig2 large: not positive definite
+    P = hermitian(nb, nbands, n, 3 * n)
+    sig2 = 10.0 ** rng.uniform(-2, 1, (nb, 3))
+    sig2[0, 1] = 1e3
+    sig2[1] = 1e-100                                    # det ~ 1e-400: log of the pivots
+    sig2[2] = 1e100                                     # det ~ 1e400
+    ref = [np.empty((nb, nbands)), np.empty((nb, nbands)), np.empty((nb, nbands), bool)]
+    walker_kernels._whittle_terms(sig2, ps, 2.5, P, *ref)
+    new = [np.empty((nb, nbands)), np.empty((nb, nbands)), np.empty((nb, nbands), bool)]
+    band_algebra._whittle_terms4(sig2, band_algebra.pack_band_sources(ps), 2.5,
+                                 band_algebra.pack_band_sums(P), *new)
+    assert not ref[2][0, 3] and ref[2].mean() > 0.9
+    assert np.all(np.isfinite(ref[0])) and np.abs(ref[0][1:3]).min() > 600
+    for r, x in zip(ref, new, strict=True):
+        assert np.array_equal(r, x)
+    assert np.array_equal(band_algebra.unpack_band_sums(band_algebra.pack_band_sums(P), nb),
+                          P)

@@ -9,7 +9,7 @@ import pytest
 from scipy import integrate, stats
 
 from bayes_amb.errors import ParameterError
-from bayes_amb.inference.priors import parse_prior
+from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet, parse_prior
 
 PRIORS = ["uniform(-0.9, 0.9)", "normal(0.2, 0.3)", "normal(0.0, 0.3, -0.95, 0.95)",
           "normal(0.5, 0.2, 0.0, 0.6)", "lognormal(-1.0, 0.5)"]
@@ -56,3 +56,35 @@ def test_truncated_normal_is_zero_outside_and_renormalised():
 def test_bad_prior_text_is_a_parameter_error(text):
     with pytest.raises(ParameterError, match="prior for k_By"):
         parse_prior(text, "k_By")
+
+
+def test_compiled_joint_log_prior_is_the_sum_of_the_densities():
+    """PriorSet.log_prior (compiled for uniform and normal priors) equals the sum of each
+    Prior.logpdf in parameter order plus the log-uniform noise terms, exactly; outside a
+    support or a noise bound it is -inf; with a lognormal prior numpy takes over."""
+    names = ("k_Ax", "k_Ay", "c_Bx", "c_By")
+    over = {"k_Ay": parse_prior("normal(0.1, 0.3)"),
+            "c_Bx": parse_prior("normal(0, 0.3, -0.5, 0.5)")}
+    priors = PriorSet.build(names, over)
+    rng = np.random.default_rng(0)
+    theta = rng.uniform(-1.0, 1.0, (200, 4))
+    ls = np.column_stack([rng.uniform(-13, -2, 200), rng.uniform(-13, -2, 200),
+                          rng.uniform(-9, 2, 200)])
+    new = priors.log_prior(theta, ls)
+    ref = np.zeros(200)
+    for j, pr in enumerate(priors.priors):
+        ref = ref + pr.logpdf(theta[:, j])
+    for j, (lo, hi) in enumerate(NOISE_LOG10_BOUNDS.values()):
+        inside = (ls[:, j] >= lo) & (ls[:, j] <= hi)
+        ref = np.where(inside, ref - np.log(hi - lo), -np.inf)
+    assert priors._table is not None
+    assert np.array_equal(new, ref)
+    assert 0 < np.isfinite(new).sum() < 200
+    logn = PriorSet.build(("c_Ax",), {"c_Ax": parse_prior("lognormal(-1, 0.5)")})
+    assert logn._table is None
+    x = np.array([[0.5], [-0.1]])
+    ls2 = np.array([[-5.0, -5.0, -1.0], [-5.0, -5.0, -1.0]])
+    noise = sum(np.log(hi - lo) for lo, hi in NOISE_LOG10_BOUNDS.values())
+    lp = logn.log_prior(x, ls2)
+    assert np.isfinite(lp[0]) and lp[1] == -np.inf
+    assert np.isclose(lp[0], logn.priors[0].logpdf(x[:1, 0])[0] - noise, rtol=1e-14)

@@ -11,7 +11,8 @@ plus a complex solve for Bm (~10 us each). Here, in one compiled call for the ba
 2. Householder reduction to upper Hessenberg form H = Q^T A Q, applied to B and C (Q is never
    formed: a modal form of (H, Q^T B, C Q) is one of (A, B, C)), all members at once;
 3. the eigenvalues of H by the Francis double-shift QR iteration without Schur vectors
-   (EISPACK hqr), member by member;
+   (EISPACK hqr), all members in lock-step (bayes_amb.inference.qr_lanes: each member's
+   arithmetic is hqr's on it alone, bit for bit);
 4. one eigenvector per real eigenvalue or conjugate pair by inverse iteration on H (the
    pivoted LU of H - lam I, one solve, LAPACK dlaein's growth test; a second step with the
    residual computed where that test fails), one eigenvalue of every member at a time,
@@ -40,10 +41,10 @@ from bayes_amb.inference.hessenberg import (
     EPS,
     RESIDUAL_FACTOR,
     _hessenberg_lanes,
-    _hqr,
     _inverse_iteration,
     _inverse_iteration_lanes,
 )
+from bayes_amb.inference.qr_lanes import _hqr_lanes
 
 PIVOT_RATIO = 1e-13
 """The eigenvector basis V_r is refused when its smallest LU pivot is below this fraction
@@ -170,31 +171,36 @@ def _modal_batch(A, B, C, lam, Bm, Cm, ok):  # pragma: no cover - compiled
             for j in range(n):
                 Cl[i, j, b] = Cb[i, j]
     _hessenberg_lanes(Hl, Bl, Cl)
-    # 2. eigenvalues member by member; the eigenvalues whose vectors are computed (a real
-    # one, or the first of a conjugate pair, with Im > 0) listed per member
+    # 2. eigenvalues, every member at once (qr_lanes: member by member hqr's arithmetic);
+    # the eigenvalues whose vectors are computed (a real one, or the first of a conjugate
+    # pair, with Im > 0) listed per member
     H = np.empty((n, n))
-    wr, wi = np.empty((nb, n)), np.empty((nb, n))
+    T = np.empty((n, n, nb))
+    wr, wi = np.zeros((nb, n)), np.zeros((nb, n))
+    hnorm, s = np.zeros(nb), np.empty(nb)
+    for j in range(n):
+        for b in range(nb):
+            s[b] = 0.0
+        for i in range(min(j + 2, n)):
+            for b in range(nb):
+                T[i, j, b] = Hl[i, j, b]
+                s[b] += abs(Hl[i, j, b])
+        for i in range(j + 2, n):
+            for b in range(nb):
+                T[i, j, b] = 0.0
+        for b in range(nb):
+            hnorm[b] = max(hnorm[b], s[b])
     tol = np.empty(nb)
+    for b in range(nb):
+        tol[b] = RESIDUAL_FACTOR * n * EPS * hnorm[b]
+        ok[b] = finite[b]
+    _hqr_lanes(T, wr, wi, ok)
     kind = np.zeros((nb, n), np.int64)             # 0 real, 1 first of a pair, 2 second
     own = np.zeros((n, nb), np.int64)              # column of the j-th computed vector
     n_own = np.zeros(nb, np.int64)
     for b in range(nb):
-        ok[b] = False
-        if not finite[b]:
+        if not ok[b]:
             continue
-        hnorm = 0.0
-        for j in range(n):
-            s = 0.0
-            for i in range(min(j + 2, n)):
-                H[i, j] = Hl[i, j, b]
-                s += abs(H[i, j])
-            for i in range(j + 2, n):
-                H[i, j] = 0.0
-            hnorm = max(hnorm, s)
-        tol[b] = RESIDUAL_FACTOR * n * EPS * hnorm
-        if not _hqr(H, wr[b], wi[b]):
-            continue
-        ok[b] = True
         j = 0
         while j < n:
             own[n_own[b], b] = j

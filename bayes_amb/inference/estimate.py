@@ -39,6 +39,11 @@ class LogPosterior:
         P = np.atleast_2d(np.asarray(P, dtype=float))
         lp = self.priors.log_prior(P[:, :self.p], P[:, self.p:])
         ok = np.isfinite(lp)
+        if ok.all():                                # the usual case: no copies
+            out = lp + self.likelihood(P[:, :self.p], P[:, self.p:])
+            self.n_evals += P.shape[0]
+            out[~np.isfinite(out)] = -np.inf
+            return out
         out = np.full(P.shape[0], -np.inf)
         if np.any(ok):
             ll = self.likelihood(P[ok, :self.p], P[ok, self.p:])

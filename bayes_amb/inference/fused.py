@@ -6,9 +6,16 @@ S(theta), the modal form, the modal state after the record, the residual band su
 4 x 4 band algebra. Called one by one from Python they cost ~11 us per evaluation more than
 their arithmetic (argument checks, dispatch, conversions and temporary arrays between the
 stages). :func:`fused_log_likelihood` runs them all in one call, stage for stage the same
-compiled functions (bayes_amb.inference.batched, loop_model, eigen, walker_kernels), so its
-results are those of the staged path to rounding (the plant's matrix product is summed in
-a fixed order here, by BLAS there).
+compiled functions (bayes_amb.inference.batched, loop_model, eigen, walker_kernels,
+block_sums, band_algebra), so its results are those of the staged path to rounding (the
+plant's matrix product is summed in a fixed order here, by BLAS there). The band sums stay
+packed for the band algebra (bayes_amb.inference.band_algebra) and are unpacked only if
+the staged path asks for the remembered batch.
+
+Every stage computes each member from that member's data alone, with the same operations
+whatever the rest of the batch (the QR iteration runs the members in lock-step but each on
+its own windows; the vectorised loops run over the members), so a row's result does not
+depend on the batch it comes in (tests/test_kernels.py).
 
 It applies to the observer-form loop (``ForwardModel.fast``) of a plain
 :class:`~bayes_amb.inference.whittle.WhittleLikelihood` and batches of at least
@@ -22,6 +29,14 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from bayes_amb.inference.band_algebra import (
+    LANES,
+    N_CH,
+    N_SRC,
+    _whittle_terms4,
+    n_chunks,
+    pack_band_sources,
+)
 from bayes_amb.inference.batched import _zoh
 from bayes_amb.inference.eigen import _final_state_batch, _modal_batch
 from bayes_amb.inference.loop_model import _error_form
@@ -30,10 +45,12 @@ from bayes_amb.inference.walker_kernels import _lanes_call, _whittle_terms
 
 @njit(cache=True, nogil=True, error_model="numpy")
 def _fused(theta, rep, pA, pBw, pCz, pB, dt, Ad, Bd, F, LC, C_S, x, tol, X, z, E,
-           inv_scale, starts, counts, sig2, phi_sources, n_rec, log_pi4, lines, coef,
-           Pb, stable, ll):  # pragma: no cover - compiled
-    # returns False when a finite member failed the compiled modal form's checks (the
-    # caller then takes the staged path, which sends such members to LAPACK)
+           inv_scale, starts, counts, sig2, phi_sources, packed_sources, n_rec, log_pi4,
+           lines, coef, Pb, packed, stable, ll):  # pragma: no cover - compiled
+    # returns 0 when a finite member failed the compiled modal form's checks (the caller
+    # then takes the staged path, which sends such members to LAPACK); 1 when the band sums
+    # are in Pb, 2 when they are in packed only (band_algebra's layout; packed is empty
+    # where the written-out band algebra does not apply)
     nb = theta.shape[0]
     n = pA.shape[0]
     r = pBw.shape[1]
@@ -79,7 +96,7 @@ def _fused(theta, rep, pA, pBw, pCz, pB, dt, Ad, Bd, F, LC, C_S, x, tol, X, z, E
                 if not np.isfinite(A_S[b, i, j]):
                     finite = False
         if finite and not ok[b]:
-            return False
+            return 0
         rho = 0.0
         for s in range(ns):
             rho = max(rho, abs(lam[b, s]))
@@ -88,11 +105,15 @@ def _fused(theta, rep, pA, pBw, pCz, pB, dt, Ad, Bd, F, LC, C_S, x, tol, X, z, E
             lam_s[b, s] = lam[b, s] if stable[b] else 0.0
     xi = np.empty((nb, ns), dtype=np.complex128)
     _final_state_batch(lam_s, Bm, x, tol, xi)
-    _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts, Pb)
+    full = _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts, Pb,
+                       packed)
     nbands = starts.size
     logdet, quad = np.empty((nb, nbands)), np.empty((nb, nbands))
     okw = np.empty((nb, nbands), dtype=np.bool_)
-    _whittle_terms(sig2, phi_sources, n_rec, Pb, logdet, quad, okw)
+    if full:
+        _whittle_terms(sig2, phi_sources, n_rec, Pb, logdet, quad, okw)
+    else:                                   # written out (band_algebra), the same results
+        _whittle_terms4(sig2, packed_sources, n_rec, packed, logdet, quad, okw)
     for b in range(nb):
         bad = not stable[b]
         for f in range(nbands):
@@ -103,7 +124,7 @@ def _fused(theta, rep, pA, pBw, pCz, pB, dt, Ad, Bd, F, LC, C_S, x, tol, X, z, E
         if bad:
             for f in range(nbands):
                 ll[b, f] = -np.inf
-    return True
+    return 1 if full else 2
 
 
 class FusedLikelihood:
@@ -134,6 +155,10 @@ class FusedLikelihood:
                      np.ascontiguousarray(like.starts, np.int64),
                      np.ascontiguousarray(like.counts, np.int64))
         self.phi_sources = np.ascontiguousarray(like.phi_sources, c128)
+        n_src, nbands, p = like.phi_sources.shape[:3]
+        self.packs = p == N_CH and n_src == N_SRC          # band_algebra's kernel applies
+        self.packed_sources = (pack_band_sources(self.phi_sources) if self.packs
+                               else np.zeros((nbands, n_src, 16)))
         self.n = float(like.n)
         self.lines = np.zeros((like.E.shape[0], like.E.shape[1], 0), dtype=c128)
         self.n_bands = like.starts.size
@@ -145,18 +170,23 @@ class FusedLikelihood:
         return all(a is b for a, b in zip(self._sources, _sources(like), strict=True))
 
     def __call__(self, theta: NDArray, sig2: NDArray
-                 ) -> tuple[NDArray, NDArray, NDArray] | None:
-        """(log-likelihood per band (nb, n_bands), P_b (nb, n_bands, 4, 4), stable (nb,))
-        for theta (nb, p) and sig2 (nb, 3), both C-contiguous float64; None where a member
-        needs the staged path (its modal form by LAPACK)."""
+                 ) -> tuple[NDArray, NDArray | None, NDArray, NDArray | None] | None:
+        """(log-likelihood per band (nb, n_bands), P_b (nb, n_bands, 4, 4), stable (nb,),
+        P_b packed) for theta (nb, p) and sig2 (nb, 3), both C-contiguous float64: P_b in
+        one of the two forms, the other None (packed as bayes_amb.inference.band_algebra
+        reads them where its kernel applies); None where a member needs the staged path
+        (its modal form by LAPACK)."""
         nb = theta.shape[0]
         Pb = np.empty((nb, self.n_bands, 4, 4), dtype=np.complex128)
+        packed = np.empty((n_chunks(nb) if self.packs else 0, self.n_bands, 16, LANES))
         stable = np.empty(nb, dtype=np.bool_)
         ll = np.empty((nb, self.n_bands))
         done = _fused(theta, self.rep, *self.plant, self.dt, *self.loop, self.x, self.tol,
-                      *self.data, sig2, self.phi_sources, self.n, self.log_pi4,
-                      self.lines, np.zeros((nb, 0)), Pb, stable, ll)
-        return (ll, Pb, stable) if done else None
+                      *self.data, sig2, self.phi_sources, self.packed_sources, self.n,
+                      self.log_pi4, self.lines, np.zeros((nb, 0)), Pb, packed, stable, ll)
+        if done == 0:
+            return None
+        return (ll, Pb, stable, None) if done == 1 else (ll, None, stable, packed)
 
 
 def _sources(like) -> tuple:

@@ -1,7 +1,9 @@
 """Compiled (numba) building blocks of the modal form (bayes_amb.inference.eigen): Householder
 reduction to Hessenberg form across a batch, the Francis double-shift QR iteration for the
-eigenvalues, and inverse iteration for the eigenvectors (one vector, or one eigenvalue of
-every member of a batch at once).
+eigenvalues of one matrix (EISPACK hqr: the reference that the lock-step iteration of
+bayes_amb.inference.qr_lanes, which the modal form runs, reproduces bit for bit), and
+inverse iteration for the eigenvectors (one vector, or one eigenvalue of every member of a
+batch at once).
 
 References: Wilkinson and Reinsch, Handbook for Automatic Computation II (1971), procedures
 orthes, hqr and invit; Press et al., Numerical Recipes, 2nd ed., sec. 11.5-11.7; Golub and

@@ -27,9 +27,11 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy import stats
 
@@ -186,6 +188,28 @@ def load_prior_file(path: str | Path) -> dict[str, Prior]:
     return out
 
 
+@njit(cache=True, nogil=True, error_model="numpy")
+def _log_prior(theta, ls, kind, a, b, lo, hi, trunc, const, log_mass, nlo, nhi, nconst,
+               out):  # pragma: no cover - compiled
+    # PriorSet.log_prior for uniform and (truncated) normal priors: per row, the terms of
+    # Prior.logpdf summed in parameter order, then the log-uniform noise intensities
+    for r in range(theta.shape[0]):
+        lp = 0.0
+        for j in range(theta.shape[1]):
+            x = theta[r, j]
+            if kind[j] == 0:
+                v = const[j] if (x >= a[j]) & (x <= b[j]) else -np.inf
+            else:
+                v = -0.5 * ((x - a[j]) / b[j]) ** 2 - const[j]
+                if trunc[j]:
+                    v = v - log_mass[j] if (x >= lo[j]) & (x <= hi[j]) else -np.inf
+            lp = lp + v
+        for j in range(ls.shape[1]):
+            inside = (ls[r, j] >= nlo[j]) & (ls[r, j] <= nhi[j])
+            lp = lp - nconst[j] if inside else -np.inf
+        out[r] = lp
+
+
 @dataclass(frozen=True)
 class PriorSet:
     """Priors of theta (in parameter order) and the log-uniform noise intensities."""
@@ -205,6 +229,12 @@ class PriorSet:
 
     def log_prior(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Joint log prior for a batch: theta (nb, p), log10_sigma (nb, 3)."""
+        table = self._table
+        if table is not None:                       # compiled: the same operations
+            out = np.empty(theta.shape[0])
+            _log_prior(np.asarray(theta, dtype=float), np.asarray(log10_sigma, dtype=float),
+                       *table, out)
+            return out
         lp = np.zeros(theta.shape[0])
         for j, pr in enumerate(self.priors):
             lp = lp + pr.logpdf(theta[:, j])
@@ -212,6 +242,28 @@ class PriorSet:
             inside = (log10_sigma[:, j] >= lo) & (log10_sigma[:, j] <= hi)
             lp = np.where(inside, lp - np.log(hi - lo), -np.inf)
         return lp
+
+    @cached_property
+    def _table(self) -> tuple[NDArray, ...] | None:
+        """The priors as arrays for _log_prior (kind 0 uniform, 1 normal; the constants
+        computed as Prior.logpdf computes them), or None if one is lognormal (its log of
+        theta is left to numpy)."""
+        if any(pr.kind == "lognormal" for pr in self.priors):
+            return None
+        kind = np.array([0 if pr.kind == "uniform" else 1 for pr in self.priors], np.int64)
+        a = np.array([pr.a for pr in self.priors], dtype=float)
+        b = np.array([pr.b for pr in self.priors], dtype=float)
+        lo = np.array([pr.lo for pr in self.priors], dtype=float)
+        hi = np.array([pr.hi for pr in self.priors], dtype=float)
+        trunc = np.array([pr.truncated for pr in self.priors])
+        const = np.array([-np.log(pr.b - pr.a) if pr.kind == "uniform"
+                          else np.log(pr.b * np.sqrt(2 * np.pi)) for pr in self.priors])
+        log_mass = np.array([np.log(pr._mass) if pr.truncated else 0.0
+                             for pr in self.priors])
+        bounds = np.array(list(NOISE_LOG10_BOUNDS.values()), dtype=float)
+        noise_const = np.array([np.log(hi_ - lo_) for lo_, hi_ in bounds])
+        return (kind, a, b, lo, hi, trunc, const, log_mass, bounds[:, 0].copy(),
+                bounds[:, 1].copy(), noise_const)
 
     def to_dict(self) -> dict[str, str]:
         d = {n: str(p) for n, p in zip(self.names, self.priors, strict=True)}

@@ -8,12 +8,15 @@ modal form laid out (mode, ..., walker)). :func:`residual_band_sums_lanes` is th
 term for term the arithmetic of the walker-by-walker one (the same order of the sums, so
 the two agree to rounding and in practice bit for bit). It pays from about a dozen walkers
 (``LANES_MIN_BATCH``; emcee hands half the ensemble to the posterior at once); smaller
-batches keep the walker-by-walker kernel.
+batches keep the walker-by-walker kernel. With exactly conjugate pairs (the compiled modal
+form's) it runs on real 2 x 2 blocks, and for 4 inputs and 4 outputs on the written-out
+form of that kernel (bayes_amb.inference.block_sums; the same results bit for bit).
 
 :func:`whittle_terms` is the band algebra of the Whittle likelihood with the spectral
 densities formed in place: Phi_b = n sum_s sigma_s^2 Phi_{s,b}, its Cholesky factor, log det
 Phi_b and tr(Phi_b^-1 P_b), as ``whittle._logdet_and_trace`` computes them but with one
-logarithm per band (of the product of the pivots) instead of one per pivot.
+logarithm per band (of the product of the pivots) instead of one per pivot; for 4 channels
+and 3 noise sources written out (bayes_amb.inference.band_algebra; bit for bit the same).
 """
 
 from __future__ import annotations
@@ -22,8 +25,11 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from bayes_amb.inference import band_algebra
+from bayes_amb.inference.block_sums import N_IN, N_OUT, _band_sums_blocks4, _pack_blocks
 from bayes_amb.inference.kernels import lines_or_empty
 
+_NOT_PACKED = np.zeros((0, 0, 16, 1))     # _lanes_call: the band sums into its `out`
 LANES_MIN_BATCH = 12
 """Smallest batch for which :func:`residual_band_sums_lanes` beats the walker-by-walker
 kernel (measured: at 8 walkers it is 1.2x slower, at 16 1.5x faster, at 32 1.6x)."""
@@ -155,13 +161,16 @@ def residual_band_sums_lanes(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray
                 np.ascontiguousarray(E, c128), 1.0 / scale,
                 np.ascontiguousarray(lines, c128), np.ascontiguousarray(coef, f64),
                 np.ascontiguousarray(starts, np.int64), np.ascontiguousarray(counts, np.int64),
-                out)
+                out, _NOT_PACKED)
     return out
 
 
 @njit(cache=True, nogil=True)
-def _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts, out):
-    # pragma: no cover - compiled: the walker-last layout, then the kernel
+def _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts, out,
+                packed):  # pragma: no cover - compiled: the walker-last layout, the kernel
+    # P_b into out (nb, nbands, p, p), or, where packed is not empty and the written-out
+    # kernel applies, into packed (band_algebra's layout) only; returns whether out holds
+    # them
     nb, ns = lam.shape
     m = Bm.shape[2]
     p = Cm.shape[1]
@@ -171,11 +180,17 @@ def _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts
         for j in range(nl):
             coef_t[j, b] = coef[b, j]
     M, B2, C2, x2 = _real_blocks(lam, Bm, Cm, xi, inv_scale)
+    if M.shape[0] > 0 and m == N_IN and p == N_OUT:   # written out (block_sums)
+        _band_sums_blocks4(_pack_blocks(M, B2, C2, x2), nb, X.real.copy(), X.imag.copy(),
+                           z.real.copy(), z.imag.copy(), E.real.copy(), E.imag.copy(),
+                           lines.real.copy(), lines.imag.copy(), coef_t, starts, counts, out,
+                           packed)
+        return packed.shape[0] == 0
     if M.shape[0] > 0 or ns == 0:
         _band_sums_pairs(M, B2, C2, x2, X.real.copy(), X.imag.copy(), z.real.copy(),
                          z.imag.copy(), E.real.copy(), E.imag.copy(), lines.real.copy(),
                          lines.imag.copy(), coef_t, starts, counts, out)
-        return
+        return True
     lr, li, xr, xim = (np.empty((ns, nb)), np.empty((ns, nb)), np.empty((ns, nb)),
                        np.empty((ns, nb)))
     Br, Bi = np.empty((ns, m, nb)), np.empty((ns, m, nb))
@@ -195,6 +210,7 @@ def _lanes_call(lam, Bm, Cm, xi, X, z, E, inv_scale, lines, coef, starts, counts
     _band_sums_lanes(lr, li, Br, Bi, Cr, Ci, xr, xim, X.real.copy(), X.imag.copy(),
                      z.real.copy(), z.imag.copy(), E.real.copy(), E.imag.copy(),
                      lines.real.copy(), lines.imag.copy(), coef_t, starts, counts, out)
+    return True
 
 
 @njit(cache=True, nogil=True, error_model="numpy")
@@ -463,7 +479,13 @@ def whittle_terms(sig2: NDArray, phi_sources: NDArray, scale: float, P: NDArray
     shape = (nb, phi_sources.shape[1])
     logdet, quad = np.empty(shape), np.empty(shape)
     ok = np.empty(shape, dtype=np.bool_)
-    _whittle_terms(np.ascontiguousarray(sig2, np.float64),
-                   np.ascontiguousarray(phi_sources, np.complex128), float(scale),
-                   np.ascontiguousarray(P, np.complex128), logdet, quad, ok)
+    sig2 = np.ascontiguousarray(sig2, np.float64)
+    phi_sources = np.ascontiguousarray(phi_sources, np.complex128)
+    P = np.ascontiguousarray(P, np.complex128)
+    if P.shape[-1] == band_algebra.N_CH and phi_sources.shape[0] == band_algebra.N_SRC:
+        band_algebra._whittle_terms4(sig2, band_algebra.pack_band_sources(phi_sources),
+                                     float(scale), band_algebra.pack_band_sums(P), logdet,
+                                     quad, ok)          # written out, the same results
+    else:
+        _whittle_terms(sig2, phi_sources, float(scale), P, logdet, quad, ok)
     return logdet, quad, ok

@@ -49,7 +49,7 @@ from scipy.signal import lfilter, welch
 
 from bayes_amb.control.discrete import ss_freqresp, ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference import kernels, walker_kernels
+from bayes_amb.inference import band_algebra, kernels, walker_kernels
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
 from bayes_amb.inference.fused import FusedLikelihood
 
@@ -303,6 +303,9 @@ class WhittleLikelihood:
         key = self._sums_key(theta)
         last = getattr(self, "_last_sums", None)
         if last is not None and last[0] == key:
+            if last[1] is None:                     # the fused call left them packed
+                last = self._last_sums = (key, band_algebra.unpack_band_sums(
+                    last[3], theta.shape[0]), last[2], None)
             return last[1], last[2]
         memo = getattr(self, "_row_sums", None)
         if memo is not None:
@@ -315,7 +318,7 @@ class WhittleLikelihood:
             Pb, stable = Pb[inverse], stable[inverse]
         else:
             Pb, stable = self._compute_band_sums(theta)
-        self._last_sums = (key, Pb, stable)
+        self._last_sums = (key, Pb, stable, None)
         return Pb, stable
 
     def _sums_key(self, theta: NDArray) -> tuple:
@@ -346,8 +349,8 @@ class WhittleLikelihood:
         out = fused(theta, np.ascontiguousarray(10.0 ** (2 * ls), dtype=float))
         if out is None:
             return None
-        ll, Pb, stable = out
-        self._last_sums = (key, Pb, stable)
+        ll, Pb, stable, packed = out
+        self._last_sums = (key, Pb, stable, packed)
         return ll
 
     def remember_rows(self, n_rows: int) -> None:
