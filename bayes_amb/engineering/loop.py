@@ -41,6 +41,9 @@ ZETA_MODE = 0.9
 """Closed-loop eigenvalues with a damping ratio at or above this are not counted as modes."""
 N_RIGID_PAIRS = 4
 """Underdamped closed-loop modes reported for the suspended rigid body (lowest first)."""
+RIGID_SHARE = 0.5
+"""A closed-loop mode is a rigid-body mode when more than this share of its kinetic energy
+is rigid-body motion (:func:`closed_loop_modes`)."""
 MODE_LABELS = ("rigid 1", "rigid 2", "rigid 3", "rigid 4", "bending 1 (lower)",
                "bending 1 (upper)")
 """Labels of the reported closed-loop modes, in the order of :attr:`LoopModes.lam`."""
@@ -115,13 +118,14 @@ def _reduced(rig: Rig, speed_rpm: float):
 @dataclass(frozen=True)
 class _Basis:
     """Open-loop modes of the nominal plant at one speed: lam (n,), W = V^-1 with the
-    columns of V scaled to unit displacement norm, and the index sets of the rigid-body and
-    first-bending modes."""
+    columns of V scaled to unit displacement norm, the index sets of the rigid-body and
+    first-bending modes, and V_rigid (n, 8) the rigid-body columns of V."""
 
     lam: NDArray
     W: NDArray
     rigid: NDArray
     bending: NDArray
+    V_rigid: NDArray
 
 
 def _basis(rig: Rig, speed_rpm: float, model: str) -> _Basis:
@@ -140,7 +144,28 @@ def _make_basis(rig: Rig, speed_rpm: float, model: str) -> _Basis:
     rest = np.arange(8, lam.size)
     under = rest[np.abs(lam[rest].imag) > np.abs(lam[rest].real)]
     bending = under[:4]                      # backward and forward whirl, with conjugates
-    return _Basis(lam=lam, W=np.linalg.inv(V), rigid=rigid, bending=bending)
+    return _Basis(lam=lam, W=np.linalg.inv(V), rigid=rigid, bending=bending,
+                  V_rigid=V[:, rigid])
+
+
+def _rigid_kinetic_share(basis: _Basis, x: NDArray, mass: NDArray | None) -> NDArray:
+    """Share of each plant eigenvector's kinetic energy in its rigid-body part.
+
+    x (n, m): plant parts of closed-loop eigenvectors, [q; q'] (full model). The rigid-body
+    part is V_rigid W_rigid x; with v and v_r the velocity rows of x and of that part,
+    T_r = v_r^H M v_r and T_f = (v - v_r)^H M (v - v_r), and the share is T_r / (T_r + T_f).
+    In the reduced model every state is rigid-body (share 1).
+    """
+    if mass is None or basis.rigid.size == basis.lam.size:
+        return np.ones(x.shape[1])
+    n_q = x.shape[0] // 2
+    v = x[n_q:]
+    v_r = basis.V_rigid[n_q:] @ (basis.W[basis.rigid] @ x)
+    v_f = v - v_r
+    t_r = np.einsum("in,in->n", v_r.conj(), mass @ v_r).real
+    t_f = np.einsum("in,in->n", v_f.conj(), mass @ v_f).real
+    total = t_r + t_f
+    return t_r / np.where(total > 0, total, 1.0)
 
 
 @dataclass(frozen=True)
@@ -193,20 +218,40 @@ def closed_loop_modes(rig: Rig, controller: ControllerFile, speed_rpm: float,
                       theta: dict[str, float], model: str = "full") -> LoopModes:
     """Closed-loop modes of the plant with ``theta`` under ``controller`` at ``speed_rpm``.
 
-    Rigid-body modes: the underdamped (zeta < 0.9) closed-loop eigenvalues whose
-    eigenvector lies mostly (> 50 % of the modal displacement energy) in the nominal
-    plant's 8 suspended rigid-body modes, lowest frequency first, the first four kept.
-    First bending: the two
-    closed-loop eigenvalues with most energy in the first bending pair (backward and
-    forward whirl), by frequency.
+    Rigid-body modes: the underdamped (zeta < 0.9) closed-loop eigenvalues in which the
+    rotor moves mostly as a rigid body: more than half (RIGID_SHARE) of the kinetic energy
+    of the eigenvector's plant part is in its component along the nominal plant's 8
+    suspended rigid-body modes. Lowest frequency first, the first four kept. First bending:
+    the two closed-loop eigenvalues with most modal displacement energy in the first
+    bending pair (backward and forward whirl), by frequency.
+
+    Kinetic energy, not displacement, because a bending mode can alias into the rigid-body
+    band. Sampled at dt, a bending vibration at f_b appears at its alias |f_b - k/dt|; the
+    controller answers with a staircase current at that frequency and moves the rotor as a
+    rigid body there. This forced rigid motion is large in displacement and small in
+    velocity. On the reference rig at 1 ms, the second bending pair's forward whirl (3094.6
+    Hz at 31500 rpm) becomes a closed-loop mode at 94.5 Hz (zeta 0.23). Of that mode,
+    76 % of the modal displacement energy but 0.3 % of the kinetic energy is in the
+    rigid-body modes. Counted by displacement, it qualified above about 30000 rpm (its
+    alias rises with speed), took the label rigid 1 as the lowest, and the labels jumped by
+    up to 40 Hz between speeds 125-250 rpm apart. By kinetic energy, over 0.8-1.05 x 31500 rpm
+    (nominal plant and k_By = 0.5), the four rigid-body modes score > 0.99 and every other
+    underdamped mode below them < 0.01. At 31500 rpm they are the regulator poles the
+    controller placed, eig(A + B F) of its design model, moved by 0.2-2 % by the bending
+    modes the design left out (test_rigid_modes_are_the_regulator_poles). Where an alias
+    falls onto a rigid-body mode, the two mix, and their shares lie near 0.5 (measured
+    0.48-0.82: near standstill, rigid 4 with the second bending pair's backward whirl; at
+    57000-58100 rpm, the 140 Hz pair with a 7.1 kHz mode). There a label can change branch.
 
     Rigid-body modes are numbered by frequency, not tracked by mode shape. On the reference
-    rig rigid 3 and 4 are a nearly degenerate, heavily damped pair (full plant at 1 ms,
-    nominal: 140.28 and 140.57 Hz, orthogonal shapes), and a bearing change mixes their
-    shapes (modal assurance criterion between the two 0.42 at k_By = 0.3, c_By = 0.2; 0.96
-    in the reduced plant, which veers near an exceptional point at (0.27, 0.16)). A label
-    matched to the nominal shapes is ill-defined there and jumps between draws, whereas
-    the frequency order is what eigenvalue continuation gives over the posterior
+    rig at 31500 rpm and 1 ms, rigid 2 and 3 are a nearly degenerate, heavily damped pair
+    (nominal: 140.28 and 140.57 Hz in the full plant, orthogonal shapes). A bearing change
+    mixes the shapes: at k_By = 0.3, c_By = 0.2 the modal assurance criterion is 0.96
+    between rigid 3 and 4 (147.8 and 153.5 Hz in the full plant, 146.7 and 152.0 in the
+    reduced one; they veer near an exceptional point at (0.27, 0.16)) and 0.42 between
+    rigid 2 and 3 (0.49 reduced). A label matched to the nominal shapes is ill-defined
+    there and jumps between draws. The frequency
+    order, by contrast, is what eigenvalue continuation gives over the posterior
     (tests/test_engineering.py::test_rigid_modes_keep_their_frequency_order).
     """
     dt = controller.dt
@@ -221,8 +266,8 @@ def closed_loop_modes(rig: Rig, controller: ControllerFile, speed_rpm: float,
     eta = basis.W @ V[:n]                                   # open-loop modal content
     energy = np.abs(eta) ** 2
     total = energy.sum(axis=0)
-    frac_r = energy[basis.rigid].sum(axis=0) / np.where(total > 0, total, 1.0)
     frac_b = energy[basis.bending].sum(axis=0) / np.where(total > 0, total, 1.0)
+    kin_r = _rigid_kinetic_share(basis, V[:n], _matrices(rig).M if model == "full" else None)
     # continuous equivalent on the branch of the dominating open-loop mode
     dom = np.argmax(energy, axis=0)
     ref = np.abs(basis.lam[dom].imag) * np.sign(eig.imag)
@@ -233,7 +278,7 @@ def closed_loop_modes(rig: Rig, controller: ControllerFile, speed_rpm: float,
     zeta = -lam_c.real / np.where(np.abs(lam_c) > 0, np.abs(lam_c), 1.0)
     under = (lam_c.imag > 0) & (zeta < ZETA_MODE)
     out = np.full(len(MODE_LABELS), np.nan + 0j)
-    rig_idx = np.flatnonzero(under & (frac_r > 0.5))
+    rig_idx = np.flatnonzero(under & (kin_r > RIGID_SHARE))
     rig_idx = rig_idx[np.argsort(lam_c[rig_idx].imag)]
     rig_idx = rig_idx[:N_RIGID_PAIRS]
     out[:rig_idx.size] = lam_c[rig_idx]

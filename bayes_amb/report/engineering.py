@@ -167,7 +167,8 @@ def engineering_section(run: RunData, opts: ReportOptions
               f"{run_rpm / 60:.1f} Hz)",
               ["mode", "frequency (Hz)", "damping ratio", "log dec", "log dec > 0.1",
                "separation margin (required) %", "margin met"], _rows_modes(res),
-              "Rigid-body modes in order of frequency; bending 1: the closed-loop modes "
+              "Rigid-body modes (most of their kinetic energy in rigid-body motion) in "
+              "order of frequency; bending 1: the closed-loop modes "
               "with most of their shape in the first bending pair (backward and forward "
               "whirl).", wrap=(1, 2, 3)),
         Table("Peak output sensitivity per axis (dB), ISO 14839-3",
