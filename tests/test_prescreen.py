@@ -79,21 +79,27 @@ def test_column_norms_are_the_energy_of_each_jacobian_column():
     assert column_norms(MT, 2)[1] == 0.0
 
 
-@pytest.fixture(scope="module")
-def nominal():
+def _nominal_fit(seed: int, effects: tuple[str, ...]):
+    """The nominal fit of a 0.5 s reduced-truth recording (k_By = 0.3, sensor noise, r1,
+    r2) hiding ``effects``."""
     rig = load_rig()
     ctrl = export_controller(reference_controller(rig, 1e-4), rig)
     cfg = SimulationConfig(
-        truth="reduced", params={"k_By": 0.3}, dt=1e-4, duration=0.5, seed=5,
+        truth="reduced", params={"k_By": 0.3}, dt=1e-4, duration=0.5, seed=seed,
         noise_rms=2e-7, r1_rms=1e-7, r2_rms=0.02,
-        effects=(parse_effect("sensor_gain:gain=0.05,channel=By"),
-                 parse_effect("unbalance:u_kgm=2e-6,disc=D2,phase_deg=40")))
+        effects=tuple(parse_effect(e) for e in effects))
     rec, _ = simulate_recording(rig, ctrl, cfg)
     fwd = ForwardModel(rec, NAMES)
     A, _, _ = fwd.excitation_system(np.zeros((1, len(NAMES))))
     checks = run_checks(rec, np.linalg.eigvals(A[0]))
     eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
     return fit_nominal(rec, NAMES, eps, start=checks.start)
+
+
+@pytest.fixture(scope="module")
+def nominal():
+    return _nominal_fit(5, ("sensor_gain:gain=0.05,channel=By",
+                            "unbalance:u_kgm=2e-6,disc=D2,phase_deg=40"))
 
 
 def _both(nominal, key):
@@ -141,7 +147,6 @@ def test_singular_candidates_are_always_screened_fully(nominal, key, attr):
     """The flexible mode's null adds the FE pair (not the current model); a second-order
     actuator's damping does nothing at zero time constant. Both go to the full screen,
     whatever their linear prediction."""
-    from bayes_amb.discrepancy.prescreen import linear_screen
     cand = make_candidate(key)
     fwd, _, post = extend(nominal, cand)
     ls = linear_screen(post, _embed(nominal, fwd), _own_columns(fwd), nominal.log_post)
@@ -238,10 +243,10 @@ def _scan(step: int = 3):
 
 
 def _exact_gain(parent, cand):
-    fwd, _, post = extend(parent, cand)
-    lin = linear_screen(post, _embed(parent, fwd), _own_columns(fwd), parent.log_post,
-                        exact=True)
-    return lin.gain
+    """A location's own screen: the exact linear screen of a line (prescreened alone)."""
+    sc = prescreened(parent, cand, SCREEN_MIN)
+    assert sc.how == "exact", (cand.key, sc.how)
+    return sc.gain
 
 
 def test_every_node_is_a_combination_of_the_virtual_planes(nominal):
@@ -278,18 +283,7 @@ def test_the_family_bound_covers_every_node(nominal):
 
 @pytest.fixture(scope="module")
 def nominal_no_line():
-    rig = load_rig()
-    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
-    cfg = SimulationConfig(
-        truth="reduced", params={"k_By": 0.3}, dt=1e-4, duration=0.5, seed=6,
-        noise_rms=2e-7, r1_rms=1e-7, r2_rms=0.02,
-        effects=(parse_effect("sensor_gain:gain=0.05,channel=By"),))
-    rec, _ = simulate_recording(rig, ctrl, cfg)
-    fwd = ForwardModel(rec, NAMES)
-    A, _, _ = fwd.excitation_system(np.zeros((1, len(NAMES))))
-    checks = run_checks(rec, np.linalg.eigvals(A[0]))
-    eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
-    return fit_nominal(rec, NAMES, eps, start=checks.start)
+    return _nominal_fit(6, ("sensor_gain:gain=0.05,channel=By",))
 
 
 def test_a_node_scan_without_a_line_costs_one_screen(nominal_no_line):

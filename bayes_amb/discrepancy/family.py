@@ -27,12 +27,10 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from bayes_amb.discrepancy.fitting import FittedModel, _embed
+from bayes_amb.discrepancy.fitting import FittedModel, _embed, extend
 from bayes_amb.discrepancy.library.base import EffectParam, ModelContext
 from bayes_amb.discrepancy.library.unbalance import Unbalance
-from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.discrepancy.prescreen import linear_screen
-from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.priors import Prior
 from bayes_amb.rotor import assemble, dof_index
 
@@ -92,12 +90,8 @@ def largest_gain(parent: FittedModel, planes: tuple[VirtualPlane, ...],
     """max dL: an upper bound on the log-likelihood gain of unbalance anywhere on the shaft
     on top of ``parent`` (nats; inf where the linear screen fails: then screen every node),
     from the ``planes`` of the parent's model (:func:`virtual_planes`)."""
-    pf = parent.forward
-    fwd = ExtendedForwardModel(pf.recording, pf.theta_names, (*parent.candidates, *planes),
-                               priors, template=pf)
+    fwd, _, post = extend(parent, planes, priors)
     x0 = _embed(parent, fwd)
-    like = parent.like.for_model(fwd, x0[:len(fwd.params)])
-    post = LogPosterior(like, fwd.priors)
     idx = np.arange(fwd.slices[-len(planes)].start, fwd.slices[-1].stop)
     lin = linear_screen(post, x0, idx, parent.log_post, exact=True)
     if not (np.isfinite(lin.gain) and lin.nested):

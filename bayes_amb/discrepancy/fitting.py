@@ -80,15 +80,16 @@ def build(recording: Recording, params: tuple[str, ...], eps: NDArray,
     return fwd, like, LogPosterior(like, fwd.priors)
 
 
-def extend(parent: FittedModel, cand: Candidate, priors: dict[str, Prior] | None = None,
-           phi: dict[str, float] | None = None
+def extend(parent: FittedModel, cand: Candidate | tuple[Candidate, ...],
+           priors: dict[str, Prior] | None = None, phi: dict[str, float] | None = None
            ) -> tuple[ExtendedForwardModel, RobustWhittle, LogPosterior]:
-    """Parent + candidate, sharing the parent's recording data and noise filters (models
-    compared with each other share one noise-spectrum family), with the line bases at the
-    parent's MAP and the candidate at ``phi`` (default its null): the point its screen or
-    refit starts from (see _embed)."""
+    """Parent + candidate (or several, in order), sharing the parent's recording data and
+    noise filters (models compared with each other share one noise-spectrum family), with
+    the line bases at the parent's MAP and the candidate at ``phi`` (default its null): the
+    point its screen or refit starts from (see _embed)."""
     pf = parent.forward
-    fwd = ExtendedForwardModel(pf.recording, pf.theta_names, (*parent.candidates, cand),
+    new = cand if isinstance(cand, tuple) else (cand,)
+    fwd = ExtendedForwardModel(pf.recording, pf.theta_names, (*parent.candidates, *new),
                                priors, template=pf)
     like = parent.like.for_model(fwd, _embed(parent, fwd, phi)[:len(fwd.params)])
     return fwd, like, LogPosterior(like, fwd.priors)
