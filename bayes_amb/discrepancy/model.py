@@ -30,7 +30,12 @@ from bayes_amb.inference.loop_model import loop_matrices
 from bayes_amb.inference.priors import Prior, PriorSet, default_prior
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
-from bayes_amb.reduction.pseudo_modal import N_RIGID, ReducedModel, keep_bending_pairs
+from bayes_amb.reduction.pseudo_modal import (
+    N_RIGID,
+    ReducedModel,
+    keep_bending_pairs,
+    residual_static,
+)
 from bayes_amb.uncertainty import lft_reduced, parse_param_list
 
 
@@ -53,8 +58,7 @@ class ExtendedForwardModel(ForwardModel):
     modes).
     """
 
-    _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases",
-               "_static_fe")
+    _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases")
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
                  candidates: tuple[Candidate, ...] = (),
@@ -69,8 +73,6 @@ class ExtendedForwardModel(ForwardModel):
             super().__init__(recording, params)
             self.ctx = model_context(self)
             self._bases: dict[tuple[int, ...], ReducedModel] = {(): self.reduced}
-            fe = self.reduced.full
-            self._static_fe = -fe.C @ np.linalg.solve(fe.A, fe.B)
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
@@ -89,9 +91,8 @@ class ExtendedForwardModel(ForwardModel):
         # the first state of each candidate's bending pair (modal hook)
         self._first = [N_RIGID + 4 * pairs.index(c.bending_pairs()[0]) if c.bending_pairs()
                        else N_RIGID for c in self.candidates]
-        b = self.base
         self.ctx = replace(self.ctx, kept_pairs=pairs,
-                           static_residual=self._static_fe + b.C @ np.linalg.solve(b.A, b.B))
+                           static_residual=residual_static(self.reduced.full, pairs))
         lft_names = list(self.theta_names)
         for c in self.candidates:
             lft_names += [n for n in c.lft_names() if n not in lft_names]

@@ -143,6 +143,17 @@ class FullModel:
         return self.A.shape[0]
 
     @cached_property
+    def modes(self) -> tuple[NDArray, NDArray, NDArray]:
+        """(lambda, W, V): the eigenvalues of A in rad/s sorted by modulus (ties by imaginary
+        part), with left (w^T A = lambda w^T) and right eigenvectors as columns, not
+        normalised. Computed once per model: the reductions and the residual flexibility
+        share it."""
+        lam, wl, vr = sla.eig(self.A, left=True, right=True)
+        order = np.lexsort((np.imag(lam), np.abs(lam)))
+        # scipy's left vectors satisfy vl^H A = lambda vl^H; w = conj(vl) gives w^T A = lambda w^T
+        return lam[order], np.conj(wl[:, order]), vr[:, order]
+
+    @cached_property
     def poles(self) -> NDArray:
         """Open-loop poles, rad/s, sorted by modulus."""
         lam = np.linalg.eigvals(self.A)
