@@ -5,8 +5,8 @@
 The recording is the one of ``bayes-amb bench --only diagnose`` (reduced truth, k_By = 0.3,
 a hidden 2.5 kHz actuator lag at both bearings, 2 s at 10 kHz, seed 3). It is diagnosed
 with default options and the library cut to its first 12 and 24 candidates, whole (34),
-and grown by unbalance at every further shaft node (half of them, then all: the library's
-``scan``). Prints one line per library: its size, the CPU time (``time.process_time``),
+and grown by unbalance and cross-coupling at every further shaft node (half of them,
+then all: the library's ``scan``; family.py screens each scan with one linearisation). Prints one line per library: its size, the CPU time (``time.process_time``),
 the effects named and the verdict. The multiplicity bar rises with the library (prior odds
 1/K), so the diagnosis itself may change with K; on this recording it does not.
 """
@@ -29,11 +29,14 @@ def libraries() -> dict[str, tuple]:
     n_nodes = assemble(load_rig()).M.shape[0] // 4
     base = all_candidates()
     have = {c.key for c in base}
-    scan = tuple(c for c in (REGISTRY["unbalance"].make(f"n{j}") for j in range(2, n_nodes))
-                 if c.key not in have)
+    scan = {e: tuple(c for c in (REGISTRY[e].make(f"n{j}") for j in range(1, n_nodes + 1))
+                     if c.key not in have) for e in ("unbalance", "cross_coupling")}
+    both = scan["unbalance"] + scan["cross_coupling"]
     return {"first 12": base[:12], "first 24": base[:24], "default": base,
-            "+ unbalance at half the nodes": base + scan[::2],
-            "+ unbalance at every node": base + scan}
+            "+ unbalance at half the nodes": base + scan["unbalance"][::2],
+            "+ unbalance at every node": base + scan["unbalance"],
+            "+ cross-coupling at every node": base + scan["cross_coupling"],
+            "+ both at every node": base + both}
 
 
 @limited_threads

@@ -70,7 +70,7 @@ COMMANDS = {
                  ["--walkers", "--steps", "--seed", "--map-method", "--params", "--prior",
                   "--prior-file", "--out"]),
     "diagnose": (["diagnose", "{miss}/rec.csv", "--out", "{tmp}/diag"],
-                 ["--threshold", "--max-effects", "--steps", "--seed", "--effects",
+                 ["--threshold", "--max-effects", "--steps", "--seed", "--effects", "--scan",
                   "--params", "--prior", "--prior-file"]),
     "study": (["study", "{miss}/s.toml", "--out", "{tmp}/study"],
               ["--workers", "--dask-local", "--scheduler", "--out"]),

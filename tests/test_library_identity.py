@@ -80,6 +80,8 @@ CASES = {
                        (SensorGain("sensor_gain", "By"),), [-0.04]),
     "cross_coupling@D1": ((Effect("cross_coupling", {"where": "D1", "kxy_nm": 4e4}),),
                           (CrossCoupling("cross_coupling", "D1"),), None),
+    "cross_coupling@n12": ((Effect("cross_coupling", {"where": 12, "kxy_nm": 6e4}),),
+                           (CrossCoupling("cross_coupling", "n12"),), None),
     "unbalance@D2": ((Effect("unbalance", {"planes": [{"node": "D2", "u_kgm": 2e-5,
                                                        "phase_rad": 0.7}]}),),
                      (Unbalance("unbalance", "D2"),), _line(2e-5, 0.7, 1e-5)),

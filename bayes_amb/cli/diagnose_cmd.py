@@ -7,7 +7,14 @@ import sys
 
 from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
 from bayes_amb.cli.options import integer, real, seed
-from bayes_amb.discrepancy import VOCABULARY, DiagnoseOptions, all_candidates, diagnose
+from bayes_amb.discrepancy import (
+    REGISTRY,
+    VOCABULARY,
+    DiagnoseOptions,
+    all_candidates,
+    diagnose,
+    node_scan,
+)
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import load_recording
 
@@ -31,6 +38,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--effects", default=",".join(VOCABULARY), metavar="NAMES",
                    help="effects to try, comma-separated (default " + ",".join(VOCABULARY)
                    + ", i.e. all)")
+    p.add_argument("--scan", default="", metavar="NAMES",
+                   help="effects to try also at every shaft node, comma-separated ("
+                   + ", ".join(k for k, v in REGISTRY.items() if v.scan) + "; default none: "
+                   "their default locations only). Each scan costs one linearisation "
+                   "per round; more candidates raise the bar for each")
     p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
                    help="log posterior odds (log Bayes factor - log of the number of "
                    "candidates tried) above which an effect is accepted, >= 0 (default 3)")
@@ -101,8 +113,14 @@ def run(args: argparse.Namespace) -> int:
     if unknown or not wanted:
         raise BayesAmbError(f"option --effects: unknown effect {unknown[0] if unknown else ''!r};"
                             f" known: {', '.join(VOCABULARY)}")
+    scan = [e.strip() for e in args.scan.split(",") if e.strip()]
+    bad = [e for e in scan if e not in REGISTRY or not REGISTRY[e].scan]
+    if bad:
+        raise BayesAmbError(f"option --scan: effect {bad[0]!r} has no node scan; known: "
+                            + ", ".join(k for k, v in REGISTRY.items() if v.scan))
     rec = load_recording(args.recording)
     cands = all_candidates(wanted)
+    cands += node_scan(scan, rec.rig.n_nodes, cands)
     quiet = args.no_progress or args.json
 
     def say(text: str) -> None:

@@ -25,10 +25,11 @@ from bayes_amb.discrepancy.library import (
     Unbalance,
     all_candidates,
     library_table,
+    node_scan,
 )
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
 
 __all__ = ["REGISTRY", "VOCABULARY", "Actuator2nd", "ActuatorGain", "ActuatorLag", "Candidate",
            "CrossCoupling", "DiagnoseOptions", "Diagnosis", "FlexibleMode", "LocateOptions",
            "Location", "Runout", "SensorDelay", "SensorGain", "SensorLag", "TimeDelay",
-           "Unbalance", "all_candidates", "diagnose", "library_table", "locate"]
+           "Unbalance", "all_candidates", "diagnose", "library_table", "locate", "node_scan"]

@@ -62,12 +62,7 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from bayes_amb.discrepancy.candidates import Candidate, SynchronousLine, all_candidates
-from bayes_amb.discrepancy.family import (
-    largest_gain,
-    member_bound,
-    scan_members,
-    virtual_planes,
-)
+from bayes_amb.discrepancy.family import VirtualPlane, member_screens, scan_families
 from bayes_amb.discrepancy.fitting import (
     FittedModel,
     _embed,
@@ -123,8 +118,9 @@ class Screen:
     how: 'full' (grid and Gauss-Newton, :func:`screen`), 'exact' (the linear screen of a
     candidate the residual is affine in: the same optimum), 'pruned' or 'outranked' (the
     linear screen's prediction, below the bar or below the round's best: not fitted; see
-    prescreen.py), 'family' (an unbalance location whose bound from the one screen of the
-    whole scan is below the bar: not fitted, the gain is the bound; see family.py).
+    prescreen.py), 'family' (a location of an unbalance or cross-coupling node scan whose
+    linear screen came from the one linearisation of the whole scan: a line's screen, or
+    a coupling's prediction below the bar; see family.py).
     linear_gain: the linear screen's prediction (None where it was not run).
     """
 
@@ -185,15 +181,16 @@ def screen_round(parent: FittedModel, pool: list[Candidate], opt: SelectOptions,
     if not opt.prescreen:
         return [screen(parent, c, priors) for c in pool]
     out: dict[str, Screen] = {}
-    members = scan_members(pool)
-    planes = virtual_planes(parent.forward.base.T_L, parent.forward.ctx) if members else ()
-    if len(members) > len(planes):
-        # one screen of the planes bounds every unbalance location at once (family.py)
-        max_dl = largest_gain(parent, planes, priors)
-        bounds = {c.key: member_bound(max_dl, c, parent.forward.ctx) for c in members}
-        if max(bounds.values()) < opt.screen_min - opt.prescreen_margin:
-            out = {k: Screen(c, b, {}, how="family", linear_gain=_num(b))
-                   for (k, b), c in zip(bounds.items(), members, strict=True)}
+    for members, basis in scan_families(parent, pool):
+        # every location's linear screen from one linearisation of its scan (family.py):
+        # a line's is its screen; a coupling below the bar is pruned, as alone
+        proj = member_screens(parent, basis, members, priors) or {}
+        lines = isinstance(basis[0], VirtualPlane)
+        for c in members:
+            ms = proj.get(c.key)
+            if ms is not None and (lines or ms.gain < opt.screen_min - opt.prescreen_margin):
+                out[c.key] = Screen(c, ms.gain, ms.phi, how="family",
+                                    linear_gain=_num(ms.gain))
     staged = []
     for c in pool:
         if c.key in out:

@@ -82,8 +82,16 @@ PARAMETERS: dict[str, ParameterSpec] = _build_vocabulary()
 
 
 def get_spec(name: str) -> ParameterSpec:
+    """The spec of a parameter name: one of PARAMETERS, or kxy_n<j>, a cross-coupled
+    stiffness at shaft node j (1-based; checked against the rig where it is used)."""
     if name not in PARAMETERS:
-        raise ParameterError(f"unknown parameter name {name!r}; known: {', '.join(PARAMETERS)}")
+        node = name.removeprefix("kxy_n")
+        if name.startswith("kxy_n") and node.isdigit() and int(node) >= 1:
+            return ParameterSpec(name, "kxy", f"n{int(node)}", None,
+                                 f"cross-coupled stiffness at shaft node {int(node)}: "
+                                 "f_x = -kxy y, f_y = +kxy x, kxy = theta k_ref", "N/m", "kxy")
+        raise ParameterError(f"unknown parameter name {name!r}; known: {', '.join(PARAMETERS)}"
+                             ", kxy_n<node>")
     return PARAMETERS[name]
 
 
@@ -101,9 +109,15 @@ def parse_param_list(text: str | list[str] | tuple[str, ...]) -> tuple[str, ...]
 
 
 def node_of(spec: ParameterSpec, rig: Rig) -> int:
-    """1-based node where a parameter acts."""
+    """1-based node where a parameter acts (a bearing, a disc or 'n<j>', shaft node j)."""
     if spec.location in rig.bearing_nodes:
         return rig.bearing_nodes[spec.location]
+    if spec.location.startswith("n") and spec.location[1:].isdigit():
+        node = int(spec.location[1:])
+        if not 1 <= node <= rig.n_nodes:
+            raise ParameterError(f"parameter {spec.name}: node {node} out of range; expected "
+                                 f"1..{rig.n_nodes}")
+        return node
     return rig.disc(spec.location).node
 
 

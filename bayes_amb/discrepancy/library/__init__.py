@@ -35,6 +35,7 @@ from bayes_amb.discrepancy.library.registry import (
     library_table,
     make_candidate,
     markdown_table,
+    node_scan,
 )
 from bayes_amb.discrepancy.library.residual_flexibility import ResidualFlexibility
 from bayes_amb.discrepancy.library.runout import Runout
@@ -51,4 +52,4 @@ __all__ = ["BEARING_COEFFICIENTS", "NOMINAL_FAMILY", "REGISTRY", "VOCABULARY", "
            "SensorLag",
            "SynchronousLine", "TimeDelay", "Unbalance", "all_candidates", "entry",
            "equivalents_of", "left_out_coefficients", "library_table", "make_candidate",
-           "markdown_table"]
+           "markdown_table", "node_scan"]

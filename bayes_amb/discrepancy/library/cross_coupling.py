@@ -23,6 +23,17 @@ class CrossCoupling(Candidate):
         return f"cross-coupled stiffness {values['kxy']:.3g} N/m at {self.location}"
 
 
+LOCATIONS = ("A", "B", "D1", "D2")
+
+
+def _make(location: str) -> CrossCoupling:
+    if location not in LOCATIONS and not (location.startswith("n") and location[1:].isdigit()
+                                          and int(location[1:]) >= 1):
+        raise ValueError(f"cross_coupling: location {location!r} is not one of "
+                         f"{', '.join(LOCATIONS)} or n<node>")
+    return CrossCoupling("cross_coupling", location)
+
+
 ENTRY = EffectEntry(
     name="cross_coupling", title="cross-coupled stiffness",
     description=("a stiffness coupling the x and y motion at one place (seal or impeller "
@@ -30,9 +41,9 @@ ENTRY = EffectEntry(
     fingerprint=("x-y coupling at one location: the residual of one axis is driven by the "
                  "excitation of the other, with opposite signs (forward/backward whirl "
                  "asymmetry)"),
-    side="plant", locations=("A", "B", "D1", "D2"),
+    side="plant", locations=LOCATIONS, scan="n1 .. n<number of nodes> (any shaft node)",
     sampled=(Sampled("kxy_{location}", Prior("uniform", -10.0, 10.0), 0.0, "-",
                      "kxy / k_ref"),),
     physical=(Quantity("kxy", "N/m", "cross-coupled stiffness"),),
-    repeatable=True, make=lambda loc: CrossCoupling("cross_coupling", loc))
+    repeatable=True, make=_make)
 CrossCoupling.entry = ENTRY

@@ -98,6 +98,27 @@ def all_candidates(names: tuple[str, ...] | list[str] | None = None,
     return tuple(out)
 
 
+def node_scan(names: tuple[str, ...] | list[str], n_nodes: int,
+              have: tuple[Candidate, ...] = ()) -> tuple[Candidate, ...]:
+    """The effects ``names`` (each with a ``scan``: unbalance, cross_coupling) at every
+    shaft node n1 .. n<n_nodes>, less the candidates ``have`` already holds. The diagnosis
+    screens each such scan with one linearisation (family.py).
+
+    >>> len(node_scan(["unbalance", "cross_coupling"], 40, all_candidates()))
+    77
+    """
+    keys = {c.key for c in have}
+    out = []
+    for n in names:
+        e = entry(n)
+        if not e.scan:
+            raise ValueError(f"effect {n!r} has no node scan; effects with one: "
+                             + ", ".join(k for k, v in REGISTRY.items() if v.scan))
+        out += [c for c in (e.make(f"n{j}") for j in range(1, n_nodes + 1))
+                if c.key not in keys]
+    return tuple(out)
+
+
 def library_table(with_nominal: bool = False) -> list[dict[str, Any]]:
     """One row per effect for listings (CLI, README, report): name, title, side, locations,
     parameters with units and priors, reported quantities, fingerprint, equivalences,
