@@ -417,7 +417,7 @@ def _candidate_table(cands: list[dict[str, Any]]) -> Table:
             row += ["", ""] if c is None else [
                 g(c["screen_gain"], 3)
                 + {"pruned": " (predicted)", "outranked": " (predicted)",
-                   "family": " (bound)"}.get(c.get("screen"), ""),
+                   "family": " (scan)"}.get(c.get("screen"), ""),
                 g(c["log_bayes_factor"], 3)]
         rows.append(row)
     return Table("Every candidate tried", header, rows,
@@ -425,7 +425,9 @@ def _candidate_table(cands: list[dict[str, Any]]) -> Table:
                  "against the residual), in nats; the best are fitted fully and scored by "
                  "their log Bayes factor (–: not fitted fully). Blank: not tried in that "
                  "round. 'predicted': the linearised screen put the candidate well below the "
-                 "bar or below the best of the round, and it was not fitted.")
+                 "bar or below the best of the round, and it was not fitted. 'scan': a "
+                 "location of a node scan, its screen projected from one linearisation of "
+                 "the whole scan.")
 
 
 def _effect_title(name: str) -> str:
