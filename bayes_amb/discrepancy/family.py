@@ -35,6 +35,7 @@ before; a scan over every node of the shaft costs one linearisation.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -43,9 +44,9 @@ from numpy.typing import NDArray
 from bayes_amb.discrepancy.fitting import FittedModel, _embed, extend
 from bayes_amb.discrepancy.gauss_newton import (
     LinearModel,
-    _curvature_scales,
-    _maximise_model,
     linearise,
+    log_prior_gradient,
+    maximise_in_box,
 )
 from bayes_amb.discrepancy.library.base import Candidate, EffectParam, ModelContext
 from bayes_amb.discrepancy.library.cross_coupling import CrossCoupling
@@ -120,7 +121,7 @@ class VirtualCoupling(CrossCoupling):
 
     def continuous(self, A, B, C, phi, ctx):
         # the plant's states come first (candidates before may have appended theirs)
-        n = int(round(np.sqrt(len(self.delta))))
+        n = math.isqrt(len(self.delta))
         A = A.copy()
         A[:, :n, :n] += phi[:, 0, None, None] * np.asarray(self.delta).reshape(n, n)
         return A, B, C
@@ -175,33 +176,21 @@ class MemberScreen:
 
 
 class _Restricted:
-    """A linear model in the basis' coordinates phi = C t of one member (t its own
-    parameters less their null), with the member's priors in place of the basis' wide
-    ones."""
+    """One member's linear model (its parameters t less their null, from the basis'
+    moments on the line of its coefficients) with the member's priors in place of the
+    basis' wide ones."""
 
-    def __init__(self, lin: LinearModel, C: NDArray, priors: list[Prior], null: NDArray):
-        self.lin, self.C, self.priors, self.null = lin, C, priors, null
-        self.cols = np.arange(C.shape[1])
+    def __init__(self, lin: LinearModel, priors: list[Prior], null: NDArray):
+        self.lin, self.priors, self.null = lin, priors, null
+        self.cols = np.arange(null.size)
 
     def value_grad(self, t: NDArray, ls: NDArray) -> tuple[float, NDArray, NDArray]:
-        """t: the member's parameters less their null."""
-        phi = self.C @ t
-        f, g, gl = self.lin.value_grad(phi, ls)
+        f, g, gl = self.lin.value_grad(t, ls)
         x = self.null + t
-        f += 0.5 * float(phi @ phi) / WIDE_SD ** 2 + sum(
+        f += 0.5 * float(t @ t) / WIDE_SD ** 2 + sum(
             float(p.logpdf(np.array([v]))[0]) for p, v in zip(self.priors, x, strict=True))
-        g = self.C.T @ (g + phi / WIDE_SD ** 2) + _prior_grad(self.priors, x)
+        g = g + t / WIDE_SD ** 2 + log_prior_gradient(self.priors, x)
         return f, g, gl
-
-
-def _prior_grad(priors: list[Prior], t: NDArray) -> NDArray:
-    g = np.zeros(t.size)
-    for j, (p, v) in enumerate(zip(priors, t, strict=True)):
-        if p.kind == "normal":
-            g[j] = -(v - p.a) / p.b ** 2
-        elif p.kind == "lognormal" and v > 0:
-            g[j] = -((np.log(v) - p.a) / p.b ** 2 + 1.0) / v
-    return g
 
 
 def _coefficients(basis: tuple[Candidate, ...], members: list[Candidate],
@@ -256,12 +245,10 @@ def member_screens(parent: FittedModel, basis: tuple[Candidate, ...], members: l
         T[0, 0] = 1.0
         T[1:, 1:] = C.T
         MT = np.ascontiguousarray(np.einsum("xa,akc,yc->xky", T, lin.MT, T, optimize=True))
-        restricted = _Restricted(LinearModel(post, x0, idx[:q], MT), np.eye(q), pri, null)
-        width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-        scale = _curvature_scales(restricted, ls, False, width)
-        t, _, pred = _maximise_model(restricted, ls, False, lo, hi, scale)
-        null = restricted.value_grad(np.zeros(len(eff)), ls)[0] - wide0
-        out[m.key] = MemberScreen(float(null + pred - parent.log_post),
+        restricted = _Restricted(LinearModel(post, x0, idx[:q], MT), pri, null)
+        t, pred = maximise_in_box(restricted, ls, lo, hi)
+        at_null = restricted.value_grad(np.zeros(len(eff)), ls)[0] - wide0
+        out[m.key] = MemberScreen(float(at_null + pred - parent.log_post),
                                   {e.name: float(e.null + v) for e, v in zip(eff, t,
                                                                              strict=True)})
     return out

@@ -25,6 +25,7 @@ where an L-BFGS step with central-difference gradients costs 2 q + 1 and many mo
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -33,6 +34,7 @@ from numpy.typing import NDArray
 
 from bayes_amb.discrepancy.likelihood import P_CH, RobustWhittle
 from bayes_amb.inference.estimate import LogPosterior
+from bayes_amb.inference.priors import Prior
 
 _LN10 = np.log(10.0)
 _STEP = 1e-5
@@ -62,8 +64,14 @@ def band_moments(G: NDArray, starts: NDArray, counts: NDArray) -> NDArray:
 
 def prior_gradient(post: LogPosterior, theta: NDArray) -> NDArray:
     """d log p(theta) / d theta inside the support (uniform 0, normal, lognormal)."""
+    return log_prior_gradient(post.priors.priors, theta)
+
+
+def log_prior_gradient(priors: Sequence[Prior], theta: NDArray) -> NDArray:
+    """d log p / d theta of independent priors, one per entry of theta, inside their
+    support (uniform 0, normal, lognormal)."""
     g = np.zeros(theta.size)
-    for j, pr in enumerate(post.priors.priors):
+    for j, pr in enumerate(priors):
         if pr.kind == "normal":
             g[j] = -(theta[j] - pr.a) / pr.b**2
         elif pr.kind == "lognormal" and theta[j] > 0:
@@ -213,6 +221,17 @@ def _maximise_model(lin: LinearModel, ls0: NDArray, noise: bool, lo: NDArray, hi
     delta, ls = split(res.x)
     gain = -float(res.fun)
     return delta, ls, (gain if np.isfinite(gain) and gain > 0 else 0.0)
+
+
+def maximise_in_box(lin: LinearModel, ls: NDArray, lo: NDArray, hi: NDArray
+                    ) -> tuple[NDArray, float]:
+    """Maximise a linear model over its parameters within [lo, hi] (relative to its
+    point), the noise held at log10 sigma ls, in coordinates scaled by its curvature (the
+    box width where the curvature is not usable); returns delta and the gain."""
+    width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
+    scale = _curvature_scales(lin, ls, False, width)
+    delta, _, pred = _maximise_model(lin, ls, False, lo, hi, scale)
+    return delta, pred
 
 
 def gauss_newton(post: LogPosterior, x0: NDArray, cols: NDArray | None = None,

@@ -53,9 +53,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.discrepancy.gauss_newton import (
-    _curvature_scales,
-    _maximise_model,
     linearise,
+    maximise_in_box,
 )
 from bayes_amb.inference.estimate import LogPosterior
 
@@ -134,9 +133,7 @@ def linear_screen(post: LogPosterior, x0: NDArray, idx: NDArray, base: float,
         return LinearScreen(-np.inf, -np.inf, x0[idx].copy(), False, False, exact)
     nested = bool(abs(null_gain - log_prior_null) < NESTED_TOL)
     regular = bool(np.all(column_norms(lin.MT, idx.size) > 0.0))
-    width = np.where(np.isfinite(hi - lo), hi - lo, 1.0)
-    scale = _curvature_scales(lin, ls, False, width)
-    delta, _, pred = _maximise_model(lin, ls, False, lo - x0[idx], hi - x0[idx], scale)
+    delta, pred = maximise_in_box(lin, ls, lo - x0[idx], hi - x0[idx])
     return LinearScreen(float(null_gain + pred), float(null_gain), x0[idx] + delta, nested,
                         regular, exact)
 
