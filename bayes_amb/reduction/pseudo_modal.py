@@ -159,6 +159,13 @@ def reduce_pseudo_modal(model: FullModel | Rig, n_bending: int = 0,
                         speed_rpm=fm.speed_rpm, full=fm)
 
 
+def kept_states(pairs: tuple[int, ...]) -> NDArray:
+    """Indices, in the modulus order of the eigenvalues, of the rigid-body modes and the
+    bending pairs ``pairs`` (1-based, each its backward and forward whirl: four states)."""
+    return np.concatenate([np.arange(N_RIGID)]
+                          + [N_RIGID + 4 * (k - 1) + np.arange(4) for k in pairs]).astype(int)
+
+
 def keep_bending_pairs(red: ReducedModel, pairs: tuple[int, ...]) -> ReducedModel:
     """The reduction keeping the rigid-body modes and only the bending pairs ``pairs``
     (1-based, each of them <= red.n_bending): its states are those of ``red`` for the kept
@@ -174,8 +181,7 @@ def keep_bending_pairs(red: ReducedModel, pairs: tuple[int, ...]) -> ReducedMode
         raise ReductionError(f"bending pairs {pairs} not all in 1..{red.n_bending}")
     if pairs == tuple(range(1, red.n_bending + 1)):
         return red
-    idx = np.concatenate([np.arange(N_RIGID)]
-                         + [N_RIGID + 4 * (k - 1) + np.arange(4) for k in pairs]).astype(int)
+    idx = kept_states(pairs)
     return ReducedModel(A=red.A[np.ix_(idx, idx)], B=red.B[idx], C=red.C[:, idx],
                         T_L=red.T_L[idx], T_R=red.T_R[:, idx], poles=red.poles[idx],
                         n_bending=len(pairs), speed_rpm=red.speed_rpm, full=red.full)
@@ -200,8 +206,6 @@ def residual_static(fm: FullModel, pairs: tuple[int, ...] = ()) -> NDArray:
     (4, 4)
     """
     lam, W, V = fm.modes
-    kept = np.concatenate([np.arange(N_RIGID)]
-                          + [N_RIGID + 4 * (k - 1) + np.arange(4) for k in pairs]).astype(int)
-    out = np.setdiff1d(np.arange(lam.size), kept)
+    out = np.setdiff1d(np.arange(lam.size), kept_states(pairs))
     w = W[:, out] / np.sum(W[:, out] * V[:, out], axis=0)
     return np.real(-(fm.C @ V[:, out]) @ ((w.T @ fm.B) / lam[out, None]))

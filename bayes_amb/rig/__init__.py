@@ -7,7 +7,9 @@ from bayes_amb.rig.rig import (
     Shaft,
     check_speed_rpm,
     load_rig,
+    node_label,
     rig_from_dict,
 )
 
-__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "check_speed_rpm", "load_rig", "rig_from_dict"]
+__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "check_speed_rpm", "load_rig", "node_label",
+           "rig_from_dict"]

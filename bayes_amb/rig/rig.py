@@ -21,6 +21,17 @@ CHANNELS: tuple[str, ...] = ("Ax", "Ay", "Bx", "By")
 """Channel names of inputs (currents) and outputs (displacements), in this order."""
 
 
+def node_label(label: str) -> int | None:
+    """j of a shaft-node label 'n<j>' (j >= 1), None for any other label.
+
+    >>> node_label("n12"), node_label("D1"), node_label("n0")
+    (12, None, None)
+    """
+    if label.startswith("n") and label[1:].isdigit() and int(label[1:]) >= 1:
+        return int(label[1:])
+    return None
+
+
 @dataclass(frozen=True)
 class Shaft:
     """Uniform solid shaft, Euler-Bernoulli elements.
@@ -88,6 +99,15 @@ class Rig:
     @property
     def n_nodes(self) -> int:
         return self.shaft.n_nodes
+
+    def shaft_node(self, label: str) -> int | None:
+        """The node j of a shaft-node label 'n<j>' (1-based, checked against the shaft);
+        None for any other label (a bearing or disc name)."""
+        node = node_label(label)
+        if node is not None and node > self.n_nodes:
+            raise RigError(f"rig {self.source}: node {label!r} out of range; expected "
+                           f"n1 .. n{self.n_nodes}")
+        return node
 
     def disc(self, name: str) -> Disc:
         for d in self.discs:

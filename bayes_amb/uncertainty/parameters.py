@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.errors import ParameterError
-from bayes_amb.rig import Rig
+from bayes_amb.rig import Rig, node_label
 from bayes_amb.rotor import RotorMatrices, dof_index
 
 
@@ -85,10 +85,10 @@ def get_spec(name: str) -> ParameterSpec:
     """The spec of a parameter name: one of PARAMETERS, or kxy_n<j>, a cross-coupled
     stiffness at shaft node j (1-based; checked against the rig where it is used)."""
     if name not in PARAMETERS:
-        node = name.removeprefix("kxy_n")
-        if name.startswith("kxy_n") and node.isdigit() and int(node) >= 1:
-            return ParameterSpec(name, "kxy", f"n{int(node)}", None,
-                                 f"cross-coupled stiffness at shaft node {int(node)}: "
+        node = node_label(name.removeprefix("kxy_")) if name.startswith("kxy_") else None
+        if node is not None:
+            return ParameterSpec(name, "kxy", f"n{node}", None,
+                                 f"cross-coupled stiffness at shaft node {node}: "
                                  "f_x = -kxy y, f_y = +kxy x, kxy = theta k_ref", "N/m", "kxy")
         raise ParameterError(f"unknown parameter name {name!r}; known: {', '.join(PARAMETERS)}"
                              ", kxy_n<node>")
@@ -112,13 +112,8 @@ def node_of(spec: ParameterSpec, rig: Rig) -> int:
     """1-based node where a parameter acts (a bearing, a disc or 'n<j>', shaft node j)."""
     if spec.location in rig.bearing_nodes:
         return rig.bearing_nodes[spec.location]
-    if spec.location.startswith("n") and spec.location[1:].isdigit():
-        node = int(spec.location[1:])
-        if not 1 <= node <= rig.n_nodes:
-            raise ParameterError(f"parameter {spec.name}: node {node} out of range; expected "
-                                 f"1..{rig.n_nodes}")
-        return node
-    return rig.disc(spec.location).node
+    node = rig.shaft_node(spec.location)
+    return rig.disc(spec.location).node if node is None else node
 
 
 def physical_change(spec: ParameterSpec, rig: Rig, theta: float,

@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 from bayes_amb.discrepancy.library.base import Candidate, EffectEntry, Quantity, Sampled
 from bayes_amb.inference.priors import Prior
+from bayes_amb.rig import node_label
 
 
 @dataclass(frozen=True)
@@ -27,8 +28,7 @@ LOCATIONS = ("A", "B", "D1", "D2")
 
 
 def _make(location: str) -> CrossCoupling:
-    if location not in LOCATIONS and not (location.startswith("n") and location[1:].isdigit()
-                                          and int(location[1:]) >= 1):
+    if location not in LOCATIONS and node_label(location) is None:
         raise ValueError(f"cross_coupling: location {location!r} is not one of "
                          f"{', '.join(LOCATIONS)} or n<node>")
     return CrossCoupling("cross_coupling", location)

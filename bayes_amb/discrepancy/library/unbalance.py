@@ -22,13 +22,8 @@ NODE_SCAN = ("n14", "n20", "n27")
 
 def node_of(rig: Rig, location: str) -> int:
     """The FE node of a disc name ('D1') or a node label ('n12', 1-based)."""
-    if location.startswith("n") and location[1:].isdigit():
-        node = int(location[1:])
-        if not 1 <= node <= rig.n_nodes:
-            raise ValueError(f"unbalance location {location!r}: node out of range; expected "
-                             f"1..{rig.n_nodes}")
-        return node
-    return rig.disc(location).node
+    node = rig.shaft_node(location)
+    return rig.disc(location).node if node is None else node
 
 
 @dataclass(frozen=True)
