@@ -29,6 +29,23 @@ N_OUT = 4
 _ROWS = 2 + 2 * N_IN + 4 + 2 * N_OUT
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def solve_block(zr, zi, m11, m12, m21, m22, w1r, w1i, w2r, w2i):  # pragma: no cover - compiled
+    # u = (z I - M)^-1 w for one real 2 x 2 modal block M = [[m11, m12], [m21, m22]] and
+    # z = zr + i zi, w and u as real and imaginary parts (Cramer's rule)
+    t1 = zr - m11                       # z - m11 = t1 + i zi, z - m22 = t2 + i zi
+    t2 = zr - m22
+    dr = t1 * t2 - zi * zi - m12 * m21
+    di = zi * (t1 + t2)
+    g = 1.0 / (dr * dr + di * di)
+    ir, ii = dr * g, -di * g            # 1 / det
+    n1r = t2 * w1r - zi * w1i + m12 * w2r
+    n1i = t2 * w1i + zi * w1r + m12 * w2i
+    n2r = m21 * w1r + t1 * w2r - zi * w2i
+    n2i = m21 * w1i + t1 * w2i + zi * w2r
+    return n1r * ir - n1i * ii, n1r * ii + n1i * ir, n2r * ir - n2i * ii, n2r * ii + n2i * ir
+
+
 @njit(cache=True, nogil=True)
 def _pack_blocks(M, B2, C2, x2):  # pragma: no cover - compiled
     # The real block form (slot, ..., walker) as one array D (chunk, slot, 22, LANES): rows
@@ -110,22 +127,9 @@ def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, coun
                         w1i += a * xi3
                         w2r += c * xr3
                         w2i += c * xi3
-                        m11, m12 = D[ch, q, 10, b], D[ch, q, 11, b]
-                        m21, m22 = D[ch, q, 12, b], D[ch, q, 13, b]
-                        t1 = zrk - m11              # z - m11 = t1 + i zi, z - m22 = t2 + i zi
-                        t2 = zrk - m22
-                        dr = t1 * t2 - zik * zik - m12 * m21
-                        di = zik * (t1 + t2)
-                        g = 1.0 / (dr * dr + di * di)
-                        ir, ii = dr * g, -di * g    # 1 / det
-                        n1r = t2 * w1r - zik * w1i + m12 * w2r
-                        n1i = t2 * w1i + zik * w1r + m12 * w2i
-                        n2r = m21 * w1r + t1 * w2r - zik * w2i
-                        n2i = m21 * w1i + t1 * w2i + zik * w2r
-                        u1r = n1r * ir - n1i * ii   # u1, u2
-                        u1i = n1r * ii + n1i * ir
-                        u2r = n2r * ir - n2i * ii
-                        u2i = n2r * ii + n2i * ir
+                        u1r, u1i, u2r, u2i = solve_block(
+                            zrk, zik, D[ch, q, 10, b], D[ch, q, 11, b], D[ch, q, 12, b],
+                            D[ch, q, 13, b], w1r, w1i, w2r, w2i)
                         a, c = D[ch, q, 14, b], D[ch, q, 15, b]
                         acc[0, b] += a * u1r + c * u2r
                         acc[4, b] += a * u1i + c * u2i

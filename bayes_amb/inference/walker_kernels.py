@@ -26,7 +26,13 @@ from numba import njit
 from numpy.typing import NDArray
 
 from bayes_amb.inference import band_algebra
-from bayes_amb.inference.block_sums import N_IN, N_OUT, _band_sums_blocks4, _pack_blocks
+from bayes_amb.inference.block_sums import (
+    N_IN,
+    N_OUT,
+    _band_sums_blocks4,
+    _pack_blocks,
+    solve_block,
+)
 from bayes_amb.inference.kernels import lines_or_empty
 
 _NOT_PACKED = np.zeros((0, 0, 16, 1))     # _lanes_call: the band sums into its `out`
@@ -249,22 +255,9 @@ def _band_sums_pairs(M, B2, C2, x2, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts
                         w2r[b] += B2[q, 1, c, b] * xrc
                         w2i[b] += B2[q, 1, c, b] * xic
                 for b in range(nb):
-                    m11, m12 = M[q, 0, 0, b], M[q, 0, 1, b]
-                    m21, m22 = M[q, 1, 0, b], M[q, 1, 1, b]
-                    t1 = zrk - m11                  # z - m11 = t1 + i zi, z - m22 = t2 + i zi
-                    t2 = zrk - m22
-                    dr = t1 * t2 - zik * zik - m12 * m21
-                    di = zik * (t1 + t2)
-                    g = 1.0 / (dr * dr + di * di)
-                    ir, ii = dr * g, -di * g        # 1 / det
-                    n1r = t2 * w1r[b] - zik * w1i[b] + m12 * w2r[b]
-                    n1i = t2 * w1i[b] + zik * w1r[b] + m12 * w2i[b]
-                    n2r = m21 * w1r[b] + t1 * w2r[b] - zik * w2i[b]
-                    n2i = m21 * w1i[b] + t1 * w2i[b] + zik * w2r[b]
-                    w1r[b] = n1r * ir - n1i * ii    # u1, u2
-                    w1i[b] = n1r * ii + n1i * ir
-                    w2r[b] = n2r * ir - n2i * ii
-                    w2i[b] = n2r * ii + n2i * ir
+                    w1r[b], w1i[b], w2r[b], w2i[b] = solve_block(
+                        zrk, zik, M[q, 0, 0, b], M[q, 0, 1, b], M[q, 1, 0, b], M[q, 1, 1, b],
+                        w1r[b], w1i[b], w2r[b], w2i[b])
                 for i in range(p):
                     for b in range(nb):
                         rr[i, b] += C2[q, i, 0, b] * w1r[b] + C2[q, i, 1, b] * w2r[b]
