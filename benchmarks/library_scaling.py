@@ -6,8 +6,9 @@ The recording is the one of ``bayes-amb bench --only diagnose`` (reduced truth, 
 a hidden 2.5 kHz actuator lag at both bearings, 2 s at 10 kHz, seed 3). It is diagnosed
 with default options and the library cut to its first 12 and 24 candidates, whole (34),
 and grown by unbalance and cross-coupling at every further shaft node (half of them,
-then all: the library's ``scan``; family.py screens each scan with one linearisation). Prints one line per library: its size, the CPU time (``time.process_time``),
-the effects named and the verdict. The multiplicity bar rises with the library (prior odds
+then all: registry.node_scan; family.py screens each scan with one linearisation). Prints
+one line per library: its size, the CPU time (``time.process_time``), the effects named
+and the verdict. The multiplicity bar rises with the library (prior odds
 1/K), so the diagnosis itself may change with K; on this recording it does not.
 """
 
@@ -17,20 +18,16 @@ import time
 
 from bayes_amb.bench.cases import make_recording
 from bayes_amb.discrepancy import DiagnoseOptions, diagnose
-from bayes_amb.discrepancy.library.registry import REGISTRY, all_candidates
+from bayes_amb.discrepancy.library.registry import all_candidates, node_scan
 from bayes_amb.rig import load_rig
-from bayes_amb.rotor import assemble
 from bayes_amb.simulate import parse_effect
 from bayes_amb.threads import limited_threads
 
 
 def libraries() -> dict[str, tuple]:
     """The libraries compared, by label."""
-    n_nodes = assemble(load_rig()).M.shape[0] // 4
     base = all_candidates()
-    have = {c.key for c in base}
-    scan = {e: tuple(c for c in (REGISTRY[e].make(f"n{j}") for j in range(1, n_nodes + 1))
-                     if c.key not in have) for e in ("unbalance", "cross_coupling")}
+    scan = {e: node_scan([e], load_rig().n_nodes, base) for e in ("unbalance", "cross_coupling")}
     both = scan["unbalance"] + scan["cross_coupling"]
     return {"first 12": base[:12], "first 24": base[:24], "default": base,
             "+ unbalance at half the nodes": base + scan["unbalance"][::2],
