@@ -8,13 +8,13 @@ import sys
 from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
 from bayes_amb.cli.options import integer, real, seed
 from bayes_amb.discrepancy import (
-    REGISTRY,
     VOCABULARY,
     DiagnoseOptions,
     all_candidates,
     diagnose,
     node_scan,
 )
+from bayes_amb.discrepancy.library.registry import scanned_effects
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import load_recording
 
@@ -40,7 +40,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    + ", i.e. all)")
     p.add_argument("--scan", default="", metavar="NAMES",
                    help="effects to try also at every shaft node, comma-separated ("
-                   + ", ".join(k for k, v in REGISTRY.items() if v.scan) + "; default none: "
+                   + ", ".join(scanned_effects()) + "; default none: "
                    "their default locations only). Each scan costs one linearisation "
                    "per round; more candidates raise the bar for each")
     p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
@@ -114,10 +114,10 @@ def run(args: argparse.Namespace) -> int:
         raise BayesAmbError(f"option --effects: unknown effect {unknown[0] if unknown else ''!r};"
                             f" known: {', '.join(VOCABULARY)}")
     scan = [e.strip() for e in args.scan.split(",") if e.strip()]
-    bad = [e for e in scan if e not in REGISTRY or not REGISTRY[e].scan]
+    bad = [e for e in scan if e not in scanned_effects()]
     if bad:
         raise BayesAmbError(f"option --scan: effect {bad[0]!r} has no node scan; known: "
-                            + ", ".join(k for k, v in REGISTRY.items() if v.scan))
+                            + ", ".join(scanned_effects()))
     rec = load_recording(args.recording)
     cands = all_candidates(wanted)
     cands += node_scan(scan, rec.rig.n_nodes, cands)

@@ -98,6 +98,11 @@ def all_candidates(names: tuple[str, ...] | list[str] | None = None,
     return tuple(out)
 
 
+def scanned_effects() -> tuple[str, ...]:
+    """The effects that can be tried at every shaft node (:func:`node_scan`)."""
+    return tuple(k for k, v in REGISTRY.items() if v.scan)
+
+
 def node_scan(names: tuple[str, ...] | list[str], n_nodes: int,
               have: tuple[Candidate, ...] = ()) -> tuple[Candidate, ...]:
     """The effects ``names`` (each with a ``scan``: unbalance, cross_coupling) at every
@@ -113,7 +118,7 @@ def node_scan(names: tuple[str, ...] | list[str], n_nodes: int,
         e = entry(n)
         if not e.scan:
             raise ValueError(f"effect {n!r} has no node scan; effects with one: "
-                             + ", ".join(k for k, v in REGISTRY.items() if v.scan))
+                             + ", ".join(scanned_effects()))
         out += [c for c in (e.make(f"n{j}") for j in range(1, n_nodes + 1))
                 if c.key not in keys]
     return tuple(out)
