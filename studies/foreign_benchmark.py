@@ -10,7 +10,11 @@ only by the scoring below, after the diagnosis.
     PYTHONPATH=. .venv/bin/python studies/foreign_benchmark.py --out runs/foreign \
         [--per-kind 4] [--kinds control,actuator_lag,...] [--seed 1] [--duration 2]
 
-Resumable: rows already in OUT/rows.jsonl are kept (each recording has its own seed).
+Resumable: rows already in OUT/rows.jsonl are kept (each recording has its own seed);
+``--redo NAMES`` drops the rows of those recordings first, so they are diagnosed again.
+A named unbalance is also scored by the diagnosis' balancing answer: the truth's
+equivalent in the two correction planes (balancing_truth: influence coefficients from the
+generator's own noise-free runs) inside each plane's 90 % credible ellipse.
 Writes OUT/rows.jsonl (one row per recording, appended atomically line by line),
 OUT/summary.md (the per-case table and the targets) and OUT/summary.json.
 """
@@ -31,7 +35,9 @@ from bayes_amb.discrepancy import diagnose
 from bayes_amb.io.atomic import json_text, write_text_atomic
 from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
-from tests.foreign import draw_case, write_case
+from tests.foreign import CaseSpec, Effect, draw_case, read_controller, write_case
+from tests.foreign.cases import clean_response
+from tests.foreign.plant import AXES
 
 DEFAULT_KINDS = ("control", "actuator_lag", "actuator_delay", "sensor_delay", "sensor_gain",
                  "cross_coupling", "unbalance", "actuator_2nd", "sensor_lag",
@@ -83,6 +89,63 @@ def physical_truth(effect: dict[str, Any]) -> dict[str, float]:
     return {}
 
 
+BALANCING_PLANES = ("D1", "D2")
+"""The correction planes of the diagnosis' default balancing answer on the reference rig."""
+CHI2_2_90 = -2.0 * np.log(0.1)
+"""90 % quantile of chi-square with 2 degrees of freedom: the credible ellipse of (a, b)."""
+
+
+def balancing_truth(truth: dict[str, Any], controller_file: Path,
+                    duration_s: float = 0.6) -> dict[str, complex]:
+    """The truth's unbalance as its equivalent in the two correction planes, found as a
+    field balancer finds it: trial unbalance in each plane (phases 0 and 90 deg), the
+    foreign generator's noise-free 1x responses at the sensors (its own plant, bearing
+    coefficients and true speed, the truth's other effects in the loop; no excitation),
+    and the pair (u_D1, u_D2) whose response is the truth's, by least squares over the
+    second half of the run (the start transient gone). Complex u e^{j phase}, kg m."""
+    rig = load_rig()
+    spec = CaseSpec(truth=truth["truth"], n_bending=truth["n_bending"],
+                    speed_rpm_true=truth["speed_rpm_true"],
+                    k_theta={a: truth["theta"][f"k_{a}"] for a in AXES},
+                    c_nsm={a: truth["bearings"][a]["c_ns_per_m"] for a in AXES},
+                    dt=truth["dt"], duration_s=duration_s)
+    ctrl = read_controller(str(controller_file))
+    n = round(duration_s / spec.dt)
+    eta = np.zeros((n, 4))
+    effects = [Effect(e["name"], e["params"]) for e in truth["effects"]]
+    others = tuple(e for e in effects if e.name != "unbalance")
+
+    def line(unbalance: tuple[Effect, ...]) -> np.ndarray:
+        y = clean_response(spec, ctrl, eta, rig, others + unbalance)
+        return y[n // 2:].ravel()
+
+    base = line(())
+    target = line(tuple(e for e in effects if e.name == "unbalance")) - base
+    unit = 1e-5
+    cols = [line((Effect("unbalance", {"planes": [{"node": p, "u_kgm": unit,
+                                                    "phase_rad": ph}]}),)) - base
+            for p in BALANCING_PLANES for ph in (0.0, np.pi / 2)]
+    c = np.linalg.lstsq(np.stack(cols, axis=1), target, rcond=None)[0]
+    return {p: complex(unit * (c[2 * k] + 1j * c[2 * k + 1]))
+            for k, p in enumerate(BALANCING_PLANES)}
+
+
+def balancing_inside(report: dict[str, Any], truth_planes: dict[str, complex]
+                     ) -> list[bool]:
+    """Per correction plane: the truth's (a, b) inside the 90 % credible ellipse of the
+    diagnosis' balancing answer (all False when it gives none)."""
+    planes = {p["plane"]: p for p in (report.get("balancing") or {}).get("planes", [])}
+    out = []
+    for name, u in truth_planes.items():
+        if name not in planes:
+            out.append(False)
+            continue
+        ab = planes[name]["ab_kgm"]
+        dev = np.array([u.real, u.imag]) - np.asarray(ab["mean"])
+        out.append(bool(dev @ np.linalg.solve(np.asarray(ab["cov"]), dev) <= CHI2_2_90))
+    return out
+
+
 def _class(expl: dict[str, Any]) -> set[str]:
     """An explanation's key and its declared equivalents ('key (condition)' entries)."""
     keys = {f"{expl['effect']}@{expl['location']}"}
@@ -100,8 +163,11 @@ def flexible_names(truth: dict[str, Any]) -> set[str]:
     return {f"flexible_mode@bending pair {k}" for k in range(1, truth.get("n_bending", 0) + 1)}
 
 
-def score(truth: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
-    """One benchmark row from the truth file and diagnosis.json (read after diagnosis)."""
+def score(truth: dict[str, Any], report: dict[str, Any],
+          controller_file: Path | None = None) -> dict[str, Any]:
+    """One benchmark row from the truth file and diagnosis.json (read after diagnosis).
+    With ``controller_file``, a named unbalance is also scored by its balancing answer
+    (balancing_truth, balancing_inside)."""
     phys = [e for e in report["explanations"] if e.get("kind", "physics") == "physics"]
     named = [f"{e['effect']}@{e['location']}" for e in phys]
     effects = list(truth["effects"])
@@ -122,6 +188,9 @@ def score(truth: dict[str, Any], report: dict[str, Any]) -> dict[str, Any]:
             par = phys[hits[0]]["params"]
             inside += [par[k]["hdi90"][0] <= v <= par[k]["hdi90"][1]
                        for k, v in phys_truth.items() if k in par]
+            if "unbalance@*" in keys and controller_file is not None \
+                    and truth["truth"] == "reduced":
+                inside += balancing_inside(report, balancing_truth(truth, controller_file))
     wrong = [named[i] for i in range(len(phys)) if i not in right_expl]
     wrong_conf = [named[i] for i in range(len(phys)) if i not in right_expl
                   and phys[i].get("confidence", "confident") == "confident"]
@@ -184,7 +253,7 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
         row = {"name": name, "error": error, "seconds": time.perf_counter() - t0,
                "cpu_s": time.process_time() - c0}
         if report is not None:
-            row.update(score(truth, report))
+            row.update(score(truth, report, ctrl))
             (out / "diagnoses").mkdir(exist_ok=True)
             write_text_atomic(out / "diagnoses" / f"{name}.json",
                               json.dumps(report, default=float) + "\n")
@@ -193,6 +262,17 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
         sys.stderr.write(f"{name}: {row.get('verdict')} named={row.get('named')} "
                          f"wrong={row.get('wrong_confident')} {row['seconds']:.0f} s\n")
     summarise(out)
+
+
+def drop_rows(out: Path, names: set[str]) -> None:
+    """Remove the rows of ``names`` from OUT/rows.jsonl (atomically), so that the next run
+    diagnoses those recordings again (each is drawn again from its own seed)."""
+    path = out / "rows.jsonl"
+    if not path.is_file():
+        return
+    keep = [line for line in path.read_text().splitlines()
+            if line.strip() and json.loads(line)["name"] not in names]
+    write_text_atomic(path, "".join(line + "\n" for line in keep))
 
 
 def summarise(out: Path) -> dict[str, Any]:
@@ -266,12 +346,20 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--counts", default="", help="per-kind counts, e.g. control=12,pair=8")
     ap.add_argument("--shard", default="0/1", help="i/n: this process does every n-th")
     ap.add_argument("--summary-only", action="store_true")
+    ap.add_argument("--redo", default="",
+                    help="recordings to diagnose again (names, e.g. unbalance_00,pair_01): "
+                         "their rows are dropped first")
     a = ap.parse_args(argv)
     if a.summary_only:
         summarise(a.out)
         return 0
     counts = {k: int(v) for k, v in (c.split("=") for c in a.counts.split(",") if c)}
     i, n = (int(v) for v in a.shard.split("/"))
+    if a.redo:
+        if n != 1:
+            ap.error("--redo runs as one process (--shard 0/1): shards would drop each "
+                     "other's new rows")
+        drop_rows(a.out, {name for name in a.redo.split(",") if name})
     run(a.out, [k for k in a.kinds.split(",") if k], a.per_kind, a.seed, a.duration,
         counts, (i, n))
     return 0

@@ -71,7 +71,7 @@ COMMANDS = {
                   "--prior-file", "--out"]),
     "diagnose": (["diagnose", "{miss}/rec.csv", "--out", "{tmp}/diag"],
                  ["--threshold", "--max-effects", "--steps", "--seed", "--effects", "--scan",
-                  "--params", "--prior", "--prior-file"]),
+                  "--planes", "--params", "--prior", "--prior-file"]),
     "study": (["study", "{miss}/s.toml", "--out", "{tmp}/study"],
               ["--workers", "--dask-local", "--scheduler", "--out"]),
     "controller": (["controller", "--rig", "{miss}/rig.toml"],

@@ -177,6 +177,17 @@ def test_concealed_effect_is_named_with_its_parameter(ctrl, effect, name, key, t
     sd = (hi - lo) / (2 * 1.645)                       # Laplace: HDI90 = mean -+ 1.645 sd
     assert abs(e["params"][key]["mean"] - true) < 3 * sd   # fails 0.3 % of seeds if calibrated
     assert r["fit"]["log_likelihood_gain"] > 3
+    if name != "unbalance":
+        assert r["balancing"] is None
+        return
+    # the balancing answer: the truth in both correction planes (nothing at D1) inside the
+    # 99.9 % credible ellipse of (a, b) (chi-square, 2 dof: fails 0.1 % of seeds)
+    planes = {p["plane"]: p for p in r["balancing"]["planes"]}
+    for plane, u in (("D1", 0j), ("D2", true * np.exp(1j * np.deg2rad(40)))):
+        ab = planes[plane]["ab_kgm"]
+        dev = np.array([u.real, u.imag]) - ab["mean"]
+        assert dev @ np.linalg.solve(ab["cov"], dev) < -2 * np.log(1e-3), plane
+    assert planes["D2"]["nonzero"]
     assert r["mismatch"]["detected"] and r["mismatch"]["bands_hz"]
 
 
@@ -215,6 +226,9 @@ def test_cli_diagnose_writes_the_documented_file(ctrl, tmp_path, capsys):
     (["--effects", "warp_drive"], "option --effects"),
     (["--max-effects", "-1"], "--max-effects: value -1 out of range: must be >= 0"),
     (["--params", "k_Zz"], "unknown parameter name"),
+    (["--planes", "D1,Q"], "option --planes: rig reference: no plane 'Q'"),
+    (["--planes", "D1"], "option --planes: rig reference: balancing needs two correction"),
+    (["--planes", "D1,n1"], "are at the same axial position"),
 ])
 def test_cli_diagnose_bad_input(ctrl, tmp_path, capsys, argv, needle):
     rec, truth = _rec(ctrl, seed=1, duration=0.05)

@@ -4,7 +4,10 @@ classes, wrong names and parameter coverage are counted as stated, and can fail.
 from __future__ import annotations
 
 import importlib.util
+import json
 from pathlib import Path
+
+import numpy as np
 
 _SPEC = importlib.util.spec_from_file_location(
     "foreign_benchmark", Path(__file__).parents[1] / "studies" / "foreign_benchmark.py")
@@ -78,3 +81,43 @@ def test_a_pair_the_reduced_truth_does_not_have_is_wrong():
                             ("residual_flexibility", "truncated modes", {}, "confident", [])))
     assert r["all_named"]
     assert r["wrong"] == ["flexible_mode@bending pair 2", "residual_flexibility@truncated modes"]
+
+
+def _balancing(mean, cov):
+    return {"balancing": {"planes": [{"plane": p, "ab_kgm": {"mean": m, "cov": cov}}
+                                     for p, m in zip(("D1", "D2"), mean, strict=True)]}}
+
+
+def test_the_balancing_answer_is_scored_by_its_credible_ellipse():
+    cov = [[1e-14, 0.0], [0.0, 1e-14]]                 # sd 1e-7 kg m per component
+    r = _balancing([[1e-6, 0.0], [0.0, -2e-6]], cov)
+    truth = {"D1": 1e-6 + 1e-7j, "D2": -2.3e-6j}        # 1 sd off, then 3 sd off
+    assert fb.balancing_inside(r, truth) == [True, False]
+    assert fb.balancing_inside({"balancing": None}, truth) == [False, False]
+
+
+def test_balancing_truth_finds_the_influence_coefficient_equivalent(tmp_path):
+    from bayes_amb.control.export import export_controller, reference_controller
+    from bayes_amb.rig import load_rig
+    rig = load_rig()
+    ctrl = tmp_path / "controller.json"
+    export_controller(reference_controller(rig, 1e-4), rig).save(ctrl)
+    axes = ("Ax", "Ay", "Bx", "By")
+    t = {"truth": "reduced", "n_bending": 0, "speed_rpm_true": 31400.0, "dt": 1e-4,
+         "theta": {**{f"k_{a}": 0.1 for a in axes}, **{f"c_{a}": 0.0 for a in axes}},
+         "bearings": {a: {"c_ns_per_m": 50.0} for a in axes},
+         "effects": [{"name": "unbalance", "params": {"planes": [
+             {"node": "D2", "u_kgm": 2e-5, "phase_rad": 0.5}]}}]}
+    eq = fb.balancing_truth(t, ctrl)
+    assert abs(eq["D2"] - 2e-5 * np.exp(0.5j)) < 1e-9 * 2e-5 and abs(eq["D1"]) < 1e-12
+    t["effects"][0]["params"]["planes"] = [{"node": 20, "u_kgm": 2e-5, "phase_rad": 0.5}]
+    eq = fb.balancing_truth(t, ctrl)                   # between the discs: both carry it
+    assert abs(eq["D1"]) > 2e-6 and abs(eq["D2"]) > 2e-6
+
+
+def test_redo_drops_only_the_named_rows(tmp_path):
+    rows = [{"name": n} for n in ("a_00", "b_00", "c_00")]
+    (tmp_path / "rows.jsonl").write_text("".join(json.dumps(r) + "\n" for r in rows))
+    fb.drop_rows(tmp_path, {"b_00"})
+    assert [json.loads(line)["name"] for line in
+            (tmp_path / "rows.jsonl").read_text().splitlines()] == ["a_00", "c_00"]

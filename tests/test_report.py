@@ -455,3 +455,27 @@ def test_answers_cli(made, capsys, tmp_path):
     assert main(["answers", str(made["run"]), "--speeds", "fast"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--speeds" in err[0]
+
+
+def test_a_named_unbalance_shows_its_correction_planes(bare):
+    """diagnosis.json's "balancing" becomes a table of the two correction planes; without
+    it (no unbalance named) there is none."""
+    from bayes_amb.report.sections import discrepancy_section
+
+    run = bare[0]
+    plane = {"plane": "D2", "z_m": 0.45, "nonzero": True,
+             "u_kgm": {"mean": 1.9e-6, "map": 1.92e-6, "hdi90": [1.86e-6, 1.99e-6]},
+             "phase_deg": {"mean": 40.0, "map": 39.6, "hdi90": [37.7, 41.5]}}
+    with_bal = dict(run.diagnosis, balancing={"planes": [dict(plane, plane="D1", z_m=0.0),
+                                                         plane]})
+    tables = {t.caption: t for t in discrepancy_section(
+        dataclasses.replace(run, diagnosis=with_bal)).tables}
+    rows = tables["Unbalance as two correction planes"].rows
+    assert [r[0] for r in rows] == ["D1", "D2"] and rows[1][2] == "1.92e-06"
+    assert rows[0][-1] == "1.92e-06 kg m at 220°"        # D1 here a copy, nonzero
+    no = dict(plane, nonzero=False)
+    tables = {t.caption: t for t in discrepancy_section(dataclasses.replace(
+        run, diagnosis=dict(run.diagnosis, balancing={"planes": [no, plane]}))).tables}
+    assert tables["Unbalance as two correction planes"].rows[0][-1] == "none (not told from 0)"
+    assert "Unbalance as two correction planes" not in {
+        t.caption for t in discrepancy_section(run).tables}

@@ -14,6 +14,7 @@ from bayes_amb.discrepancy import (
     diagnose,
     node_scan,
 )
+from bayes_amb.discrepancy.balancing import check_planes
 from bayes_amb.discrepancy.library.registry import scanned_effects
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import load_recording
@@ -43,6 +44,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    + ", ".join(scanned_effects()) + "; default none: "
                    "their default locations only). Each scan costs one linearisation "
                    "per round; more candidates raise the bar for each")
+    p.add_argument("--planes", default=None, metavar="P1,P2",
+                   help="the two correction planes of the balancing answer when unbalance "
+                   "is named: discs, bearings or shaft nodes n<j> (default: the two discs "
+                   "furthest apart)")
     p.add_argument("--threshold", type=real(0), default=3.0, metavar="LOGBF",
                    help="log posterior odds (log Bayes factor - log of the number of "
                    "candidates tried) above which an effect is accepted, >= 0 (default 3)")
@@ -88,6 +93,13 @@ def format_report(r: dict) -> str:
                          f"(log BF {e['score']:.1f}, {e.get('confidence', 'confident')}{same})")
     else:
         lines.append("explanation   : none named")
+    for pl in (r.get("balancing") or {}).get("planes", []):
+        u, ph = pl["u_kgm"], pl["phase_deg"]
+        lines.append(f"balancing     : plane {pl['plane']}: {u['map']:.3g} [{u['hdi90'][0]:.3g}, "
+                     f"{u['hdi90'][1]:.3g}] kg m at {ph['map']:.0f} [{ph['hdi90'][0]:.0f}, "
+                     f"{ph['hdi90'][1]:.0f}] deg"
+                     + (" (correction mass opposite)" if pl.get("nonzero")
+                        else " (not told from 0: no correction needed)"))
     un = r.get("unexplained") or {}
     if un.get("present"):
         lines.append(f"unexplained   : structure on {', '.join(un['channels'])}"
@@ -119,6 +131,13 @@ def run(args: argparse.Namespace) -> int:
         raise BayesAmbError(f"option --scan: effect {bad[0]!r} has no node scan; known: "
                             + ", ".join(scanned_effects()))
     rec = load_recording(args.recording)
+    planes = None
+    if args.planes is not None:
+        planes = tuple(p.strip() for p in args.planes.split(","))
+        try:
+            check_planes(rec.rig, planes)
+        except BayesAmbError as exc:
+            raise BayesAmbError(f"option --planes: {exc}") from None
     cands = all_candidates(wanted)
     cands += node_scan(scan, rec.rig.n_nodes, cands)
     quiet = args.no_progress or args.json
@@ -129,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
 
     d = diagnose(rec, args.params, priors, DiagnoseOptions(
         log_bf_threshold=args.threshold, max_effects=args.max_effects, candidates=cands,
-        sample=args.sample, steps=args.steps, seed=args.seed, progress=say))
+        sample=args.sample, steps=args.steps, seed=args.seed, progress=say, planes=planes))
     d.save(args.out)
     report = to_jsonable(d.report)
     emit(report, format_report(report) + f"\nwrote {args.out}/diagnosis.json, "

@@ -27,6 +27,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_amb import __version__
+from bayes_amb.discrepancy.balancing import balancing, check_planes
 from bayes_amb.discrepancy.candidates import (
     BEARING_COEFFICIENTS,
     Candidate,
@@ -71,7 +72,9 @@ class DiagnoseOptions:
     all), prescreen (route candidates by their fingerprint, prescreen.py; False screens
     every one fully), sample (run emcee on the nominal and the final model; otherwise their
     posteriors are Laplace approximations), steps per sampled model, seed, progress
-    callback(text)."""
+    callback(text), planes (the two correction planes of the balancing answer when
+    unbalance is named: discs, bearings or nodes 'n<j>'; default the two discs furthest
+    apart, balancing.py)."""
 
     log_bf_threshold: float = 3.0
     max_effects: int = 4
@@ -81,6 +84,7 @@ class DiagnoseOptions:
     steps: int = 2000
     seed: int = 0
     progress: Callable[[str], None] | None = None
+    planes: tuple[str, str] | None = None
 
 
 @dataclass
@@ -237,6 +241,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     opt = options or DiagnoseOptions()
     t0 = time.perf_counter()
     require_excitation(recording)
+    if opt.planes is not None:
+        check_planes(recording.rig, opt.planes)
     names = parse_param_list(",".join(BEARING_COEFFICIENTS) if params is None else params)
     say = opt.progress or (lambda _: None)
     fwd = ForwardModel(recording, names)
@@ -312,6 +318,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,
+        "balancing": balancing(sel.final, opt.planes, priors, seed=opt.seed),
         "candidates": sel.scores,
         "fit": {"before": {k: before[k] for k in ("nrmse", "whiteness_p")},
                 "after": {k: after[k] for k in ("nrmse", "whiteness_p")},

@@ -321,6 +321,13 @@ def _hdi(v: dict[str, Any]) -> str:
     return f"[{g(v['hdi90'][0])}, {g(v['hdi90'][1])}]"
 
 
+def _correction(plane: dict[str, Any]) -> str:
+    """The correction of one balancing plane: m r (kg m) at the opposite angle, or none."""
+    if not plane.get("nonzero"):
+        return "none (not told from 0)"
+    return f"{g(plane['u_kgm']['map'])} kg m at {(plane['phase_deg']['map'] + 180) % 360:.0f}°"
+
+
 def discrepancy_section(run: RunData) -> Section:
     """The diagnosis: verdict, where it failed, the named physics, the fit before/after."""
     dg = run.diagnosis or {}
@@ -356,6 +363,19 @@ def discrepancy_section(run: RunData) -> Section:
                             "(`bayes-amb library`); the last column is the effect's "
                             "equivalence class: explanations with the same u → y map.",
                             wrap=(0, 1, 4, 7)))
+    bal = (dg.get("balancing") or {}).get("planes", [])
+    if bal:
+        tables.append(Table("Unbalance as two correction planes", [
+            "plane", "z (m)", "u (kg m)", "90 % HDI", "phase (deg)", "90 % HDI",
+            "correction m r"],
+            [[pl["plane"], g(pl["z_m"], 3), g(pl["u_kgm"]["map"]), _hdi(pl["u_kgm"]),
+              g(pl["phase_deg"]["map"], 3), _hdi(pl["phase_deg"]), _correction(pl)]
+             for pl in bal],
+            "The unbalance named, refitted as unbalance in two planes: the pair with the "
+            "same 1x response at the sensors (the influence-coefficient answer). A "
+            "correction mass m at radius r removes it when m r = u, placed at the phase + "
+            "180° (phase at t = 0 of the record). 'none' where 0 lies inside the plane's "
+            "90 % credible ellipse (the interval of u, a magnitude, never holds 0)."))
     fit = dg.get("fit", {})
     if fit:
         tables.append(Table("Fit before and after", [
