@@ -93,8 +93,8 @@ def two_plane(u: NDArray, z: NDArray, z1: float, z2: float) -> tuple[NDArray, ND
     Examples
     --------
     >>> u1, u2 = two_plane(np.array([2.0 + 0j]), np.array([0.25]), 0.0, 1.0)
-    >>> complex(u1), complex(u2)
-    ((1.5+0j), (0.5+0j))
+    >>> float(abs(u1 - 1.5)), float(abs(u2 - 0.5))
+    (0.0, 0.0)
     """
     if z1 == z2:
         raise ValueError("two_plane: the two planes are at the same axial position")
