@@ -172,6 +172,10 @@ def balancing(final: FittedModel, planes: tuple[str, str] | None = None,
     fm = balancing_model(final, planes, priors)
     if fm is None:
         return None
+    if fm.cov is None or not np.isfinite(fm.log_post):
+        return {"planes": [], "from": [c.key for c in final.candidates
+                                       if isinstance(c, Unbalance)],
+                "note": "the two-plane refit found no usable posterior: no balancing answer"}
     rig = fm.forward.ctx.rig
     planes = tuple(c.location for c in fm.candidates if isinstance(c, Unbalance))
     d_all = _coefficients(fm, draws(fm, seed=seed))
@@ -199,8 +203,9 @@ def balancing(final: FittedModel, planes: tuple[str, str] | None = None,
             "inference": "MAP with Laplace approximation",
             "meaning": ("the unbalance named, refitted as unbalance in two correction planes "
                         "(the pair with the same 1x response at the sensors, as the "
-                        "influence-coefficient method finds it); a correction mass m at radius r in a plane "
-                        "removes it when m r = u_kgm and it sits at phase_deg + 180 (phase "
+                        "influence-coefficient method finds it); a correction mass m at "
+                        "radius r in a plane removes it when m r = u_kgm and it sits at "
+                        "phase_deg + 180 (phase "
                         "at t = 0 of the record; its interval may pass +-180). nonzero: 0 lies "
                         "outside the plane's 90 % credible ellipse of (a, b); the interval "
                         "of u_kgm never holds 0 (a magnitude), so read this instead. "
