@@ -460,7 +460,7 @@ def test_answers_cli(made, capsys, tmp_path):
 def test_a_named_unbalance_shows_its_correction_planes(bare):
     """diagnosis.json's "balancing" becomes a table of the two correction planes; without
     it (no unbalance named) there is none."""
-    from bayes_amb.report.sections import discrepancy_section
+    from bayes_amb.report.discrepancy import discrepancy_section
 
     run = bare[0]
     plane = {"plane": "D2", "z_m": 0.45, "nonzero": True,

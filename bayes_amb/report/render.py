@@ -27,6 +27,7 @@ from bayes_amb.io.atomic import atomic_path, write_text_atomic
 from bayes_amb.report import sections as sc
 from bayes_amb.report.collect import ReportError, RunData
 from bayes_amb.report.derived import derive
+from bayes_amb.report.discrepancy import discrepancy_section
 from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, g, gsd
 from bayes_amb.rig import CHANNELS
 from bayes_amb.threads import limited_threads
@@ -362,7 +363,7 @@ def build_sections(run: RunData, argv: list[str], opts: ReportOptions,
         sec, facts["rt"] = sc.validation_section(d, facts["snr"])
         body.append(sec)
     if run.diagnosis is not None:
-        body.append(sc.discrepancy_section(run))
+        body.append(discrepancy_section(run))
     if run.studies:
         body.append(sc.studies_section(run))
     body.append(sc.provenance_section(run, argv))
