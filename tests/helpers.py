@@ -33,3 +33,9 @@ def dlsim(sys, u: np.ndarray) -> np.ndarray:
     _, y, _ = sig.dlsim((np.asarray(sys.A), np.asarray(sys.B), np.asarray(sys.C),
                          np.asarray(sys.D), sys.dt), u)
     return y
+
+
+K_THETA = {"Ax": 0.2, "Ay": -0.1, "Bx": 0.25, "By": -0.3}
+C_NSM = {"Ax": 100.0, "Ay": 0.0, "Bx": 250.0, "By": 50.0}
+"""Every bearing coefficient off nominal (ks reduction per axis, added damping in N s/m):
+the foreign generator's settings in the identity tests."""

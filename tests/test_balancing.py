@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from bayes_amb.discrepancy.balancing import default_planes, plane_z, two_plane
+from bayes_amb.discrepancy.candidates import BEARING_COEFFICIENTS as NAMES
 from bayes_amb.discrepancy.library import Unbalance
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
@@ -20,10 +21,7 @@ from bayes_amb.io import load_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.rig.rig import RigError
 from tests.foreign import CaseSpec, Effect, Habits, write_case
-
-K_THETA = {"Ax": 0.2, "Ay": -0.1, "Bx": 0.25, "By": -0.3}
-C_NSM = {"Ax": 100.0, "Ay": 0.0, "Bx": 250.0, "By": 50.0}
-NAMES = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
+from tests.helpers import C_NSM, K_THETA
 
 
 def test_two_plane_keeps_resultant_and_moment():
@@ -48,15 +46,6 @@ def test_default_planes_and_plane_positions():
     assert plane_z(rig, "n7") == z[6]
     with pytest.raises(RigError, match="no plane 'Q'"):
         plane_z(rig, "Q")
-
-
-@pytest.fixture(scope="module")
-def controller_file(tmp_path_factory):
-    from bayes_amb.control.export import export_controller, reference_controller
-    rig = load_rig()
-    path = tmp_path_factory.mktemp("ctrl") / "controller.json"
-    export_controller(reference_controller(rig, 1e-4), rig).save(path)
-    return str(path)
 
 
 def _two_disc_fit(controller_file, tmp_path, planes, eq_planes=("D1", "D2")):

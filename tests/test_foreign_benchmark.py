@@ -96,12 +96,8 @@ def test_the_balancing_answer_is_scored_by_its_credible_ellipse():
     assert fb.balancing_inside({"balancing": None}, truth) == [False, False]
 
 
-def test_balancing_truth_finds_the_influence_coefficient_equivalent(tmp_path):
-    from bayes_amb.control.export import export_controller, reference_controller
-    from bayes_amb.rig import load_rig
-    rig = load_rig()
-    ctrl = tmp_path / "controller.json"
-    export_controller(reference_controller(rig, 1e-4), rig).save(ctrl)
+def test_balancing_truth_finds_the_influence_coefficient_equivalent(controller_file):
+    ctrl = controller_file
     axes = ("Ax", "Ay", "Bx", "By")
     t = {"truth": "reduced", "n_bending": 0, "speed_rpm_true": 31400.0, "dt": 1e-4,
          "theta": {**{f"k_{a}": 0.1 for a in axes}, **{f"c_{a}": 0.0 for a in axes}},

@@ -24,22 +24,11 @@ from tests.foreign import CaseSpec, Effect, Habits, read_controller, rotor
 from tests.foreign.cases import simulate
 from tests.foreign.habits import habit_signals
 from tests.foreign.plant import AXES, dof
+from tests.helpers import C_NSM, K_THETA
 
 FOREIGN = Path(__file__).parent / "foreign"
 ALLOWED = {"bayes_amb.rig", "bayes_amb.rotor"}
 FORBIDDEN = ("simulate", "discrepancy", "reduction", "uncertainty", "inference", "control")
-K_THETA = {"Ax": 0.2, "Ay": -0.1, "Bx": 0.25, "By": -0.3}
-C_NSM = {"Ax": 100.0, "Ay": 0.0, "Bx": 250.0, "By": 50.0}
-
-
-@pytest.fixture(scope="module")
-def controller_file(tmp_path_factory):
-    """The reference controller, exported exactly as `bayes-amb controller --export` does."""
-    from bayes_amb.control.export import export_controller, reference_controller
-    rig = load_rig()
-    path = tmp_path_factory.mktemp("ctrl") / "controller.json"
-    export_controller(reference_controller(rig, 1e-4), rig).save(path)
-    return str(path)
 
 
 # ------------------------------------------------------------------ independence

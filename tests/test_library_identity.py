@@ -36,9 +36,8 @@ from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.io import load_recording
 from bayes_amb.rig import load_rig
 from tests.foreign import CaseSpec, Effect, Habits, write_case
+from tests.helpers import C_NSM, K_THETA
 
-K_THETA = {"Ax": 0.2, "Ay": -0.1, "Bx": 0.25, "By": -0.3}
-C_NSM = {"Ax": 100.0, "Ay": 0.0, "Bx": 250.0, "By": 50.0}
 NAMES = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
 TOL = 1e-6
 
@@ -111,15 +110,6 @@ CASES = {
         (ActuatorGain("actuator_gain", "Bx"), SensorLag("sensor_lag", "A"),
          Runout("runout", "By")), [-0.08, _tau_ms(2500), *_line(1e-7, 1.0, 1e-7)]),
 }
-
-
-@pytest.fixture(scope="module")
-def controller_file(tmp_path_factory):
-    from bayes_amb.control.export import export_controller, reference_controller
-    rig = load_rig()
-    path = tmp_path_factory.mktemp("ctrl") / "controller.json"
-    export_controller(reference_controller(rig, 1e-4), rig).save(path)
-    return str(path)
 
 
 def _record(controller_file, tmp_path, effects, duration=0.2):
