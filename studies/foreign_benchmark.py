@@ -32,6 +32,7 @@ import numpy as np
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import diagnose
+from bayes_amb.discrepancy.balancing import in_credible_ellipse
 from bayes_amb.io.atomic import json_text, write_text_atomic
 from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
@@ -91,8 +92,6 @@ def physical_truth(effect: dict[str, Any]) -> dict[str, float]:
 
 BALANCING_PLANES = ("D1", "D2")
 """The correction planes of the diagnosis' default balancing answer on the reference rig."""
-CHI2_2_90 = -2.0 * np.log(0.1)
-"""90 % quantile of chi-square with 2 degrees of freedom: the credible ellipse of (a, b)."""
 
 
 def balancing_truth(truth: dict[str, Any], controller_file: Path,
@@ -141,8 +140,7 @@ def balancing_inside(report: dict[str, Any], truth_planes: dict[str, complex]
             out.append(False)
             continue
         ab = planes[name]["ab_kgm"]
-        dev = np.array([u.real, u.imag]) - np.asarray(ab["mean"])
-        out.append(bool(dev @ np.linalg.solve(np.asarray(ab["cov"]), dev) <= CHI2_2_90))
+        out.append(in_credible_ellipse(np.array([u.real, u.imag]), ab["mean"], ab["cov"]))
     return out
 
 

@@ -121,9 +121,10 @@ def balancing_model(final: FittedModel, planes: tuple[str, str] | None = None,
     cands = (*(c for c in final.candidates if not isinstance(c, Unbalance)), *new)
     u = _coefficients(final, final.params[None])
     eq = two_plane(u, np.array([plane_z(rig, c.location) for c in named]), *zp)
-    start = {f"unb_{ab}_{p}": float(getattr(complex(e[0]) / named[0].UNIT, part))
-             for p, e in zip(planes, eq, strict=True)
-             for ab, part in (("a", "real"), ("b", "imag"))}
+    start = {}
+    for p, e in zip(planes, eq, strict=True):
+        v = complex(e[0]) / named[0].UNIT
+        start |= {f"unb_a_{p}": v.real, f"unb_b_{p}": v.imag}
     fwd2 = ExtendedForwardModel(fwd.recording, fwd.theta_names, cands, priors, template=fwd)
     x0 = np.concatenate([fwd2.null, final.log10_sigma])
     for j, n in enumerate(fwd2.params):
@@ -134,18 +135,23 @@ def balancing_model(final: FittedModel, planes: tuple[str, str] | None = None,
     return FittedModel(cands, fwd2, like, post, x, log_post, cov=free_covariance(post, x))
 
 
-CHI2_2_90 = float(-2.0 * np.log(0.1))
-"""The 90 % quantile of chi-square with 2 degrees of freedom (exactly -2 ln 0.1)."""
+def in_credible_ellipse(v: NDArray, mean: NDArray, cov: NDArray, prob: float = 0.9) -> bool:
+    """Whether the point v (a, b) lies inside the ``prob`` credible ellipse of a Gaussian
+    (mean, cov): Mahalanobis distance squared <= the chi-square (2 dof) quantile
+    -2 ln(1 - prob). A singular covariance holds only its mean.
 
-
-def _outside_ellipse(v: NDArray, mean: NDArray, cov: NDArray) -> bool:
-    """Whether v lies outside the 90 % credible ellipse of a Gaussian (mean, cov) in (a, b)
-    (True also where the covariance is singular and v is not the mean)."""
-    d = np.asarray(v, dtype=float) - mean
+    Examples
+    --------
+    >>> cov, mean = np.eye(2), np.zeros(2)
+    >>> [in_credible_ellipse(np.array([r, 0.0]), mean, cov) for r in (2.0, 2.2)]
+    [True, False]
+    """
+    d = np.asarray(v, dtype=float) - np.asarray(mean, dtype=float)
     try:
-        return bool(d @ np.linalg.solve(cov, d) > CHI2_2_90)
+        return bool(d @ np.linalg.solve(np.asarray(cov, dtype=float), d)
+                    <= -2.0 * np.log(1.0 - prob))
     except np.linalg.LinAlgError:
-        return bool(np.any(d != 0))
+        return not bool(np.any(d != 0))
 
 
 def _log_likelihood(fm: FittedModel) -> float:
@@ -172,9 +178,9 @@ def balancing(final: FittedModel, planes: tuple[str, str] | None = None,
     fm = balancing_model(final, planes, priors)
     if fm is None:
         return None
+    named = [c.key for c in final.candidates if isinstance(c, Unbalance)]
     if fm.cov is None or not np.isfinite(fm.log_post):
-        return {"planes": [], "from": [c.key for c in final.candidates
-                                       if isinstance(c, Unbalance)],
+        return {"planes": [], "from": named,
                 "note": "the two-plane refit found no usable posterior: no balancing answer"}
     rig = fm.forward.ctx.rig
     planes = tuple(c.location for c in fm.candidates if isinstance(c, Unbalance))
@@ -195,19 +201,19 @@ def balancing(final: FittedModel, planes: tuple[str, str] | None = None,
                           "hdi90": [ph0 + v for v in hdi(rel)], "unit": "deg"},
             "ab_kgm": {"mean": [float(v) for v in mean], "cov": cov.tolist(),
                        "unit": "kg m"},
-            "nonzero": _outside_ellipse(np.zeros(2), mean, cov),
+            "nonzero": not in_credible_ellipse(np.zeros(2), mean, cov),
         })
     return {"planes": out,
-            "from": [c.key for c in final.candidates if isinstance(c, Unbalance)],
+            "from": named,
             "log_likelihood_change": _log_likelihood(fm) - _log_likelihood(final),
             "inference": "MAP with Laplace approximation",
             "meaning": ("the unbalance named, refitted as unbalance in two correction planes "
                         "(the pair with the same 1x response at the sensors, as the "
                         "influence-coefficient method finds it); a correction mass m at "
                         "radius r in a plane removes it when m r = u_kgm and it sits at "
-                        "phase_deg + 180 (phase "
-                        "at t = 0 of the record; its interval may pass +-180). nonzero: 0 lies "
-                        "outside the plane's 90 % credible ellipse of (a, b); the interval "
-                        "of u_kgm never holds 0 (a magnitude), so read this instead. "
-                        "log_likelihood_change: the two-plane model's log likelihood at its MAP "
-                        "against the named one's (about 0: the same response)")}
+                        "phase_deg + 180 (phase at t = 0 of the record; its interval may "
+                        "pass +-180). nonzero: 0 lies outside the plane's 90 % credible "
+                        "ellipse of (a, b); the interval of u_kgm never holds 0 (a "
+                        "magnitude), so read this instead. log_likelihood_change: the "
+                        "two-plane model's log likelihood at its MAP against the named "
+                        "one's (about 0: the same response)")}
