@@ -162,6 +162,16 @@ class RobustWhittle(WhittleLikelihood):
                           for c in fwd.line_candidates])
         return np.concatenate(self.lines, axis=2), coef
 
+    def curvature_weights(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
+        """W_b = (nu_b + n_b) (Psi_b + P_b)^-1 at (theta, log10 sigma): the weight of a
+        residual bin in the Gauss-Newton curvature of the band's log p(R_b) (the noise
+        spectrum integrated out); (n_bands, 4, 4)."""
+        Pb, _ = self.band_sums(np.atleast_2d(theta))
+        sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
+        Psi = (np.tensordot(sig2, self.phi_sources, axes=(0, 0)) * self.n
+               * (self.nu - self.shift)[:, None, None])
+        return (self.nu + self.counts)[:, None, None] * np.linalg.inv(Psi + Pb[0])
+
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         theta = np.atleast_2d(theta)
         ls = np.atleast_2d(log10_sigma)
