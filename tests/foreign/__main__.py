@@ -7,7 +7,8 @@ The default suite has 90 recordings: 10 controls, 4 of each of the 10 in-family 
 effects, 10 pairs, 6 held-out (pedestal), 4 full-truth, then (issue 27) 5 controls with a
 process force (control_force) and 5 of each held-out family current_limit, seal and
 ks_drift; ``--scale`` multiplies every count. The first 70 are drawn as before (each
-recording's seed is spawned by its position). OUT_DIR/index.json lists them with their effects and concealments.
+recording's seed is spawned by its position). OUT_DIR/index.json lists them with their
+effects and concealments.
 """
 
 from __future__ import annotations

@@ -348,8 +348,8 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
     """Bring each effect's concealment into ``band`` (default [0.2, 1)): weaken it by steps
     of 0.7 while it is >= band[1]; if its first draw is below band[0], strengthen it by
     1/0.7 while the stronger version stays below band[1] (and, for a ks_drift, within
-    KS_DRIFT_CAP). A current limit is left alone (see calibrate_current_limit). Returns the case and the
-    concealments per effect (index:name), of all effects together ('all') and of the
+    KS_DRIFT_CAP). A current limit is left alone (see calibrate_current_limit). Returns the
+    case and the concealments per effect (index:name), of all effects together ('all') and of the
     flexible modes of a full or bending truth ('flexible', never changed)."""
     n = round(spec.duration_s / spec.dt)
     eta = spec.habits.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
