@@ -19,6 +19,11 @@ the applied current is w[k-n-1] for the first f dt and w[k-n] for the rest, so e
 current in force just before the sampling instant, w[k-n-1]). With tau = 0 this is the plain
 ZOH. Plant, controller and a delay line of w form one discrete LTI system, built once and
 run by a plain recursion.
+
+The same system broken open at the amplifier input (w = Cw X + Dw e enters through Bw)
+runs an amplifier current limit, clip(w), sample by sample; a plant that varies slowly in
+time runs as a staircase of such systems (:func:`run_segments`); disc forces (N) enter
+through ``Bf``, held over each sample like the current.
 """
 
 from __future__ import annotations
