@@ -398,12 +398,16 @@ def family(kind: str) -> str:
 def coefficient_coverage(theta: dict[str, float], params: dict[str, Any]
                          ) -> dict[str, dict[str, float | bool]]:
     """Per bearing coefficient in both: {'inside': truth in hdi90, 'width': hi - lo}
-    (``params``: a diagnosis' parameters_after or identify's summary 'parameters')."""
-    out = {}
+    (``params``: a diagnosis' parameters_after or identify's summary 'parameters'). An
+    interval that is not finite (identify without a Laplace covariance gives NaN) counts
+    as outside, with width None."""
+    out: dict[str, dict[str, float | bool | None]] = {}
     for n in COEFFICIENTS:
         if n in theta and n in params:
-            lo, hi = params[n]["hdi90"]
-            out[n] = {"inside": bool(lo <= theta[n] <= hi), "width": float(hi - lo)}
+            lo, hi = (float(v) if v is not None else np.nan for v in params[n]["hdi90"])
+            ok = bool(np.isfinite(lo) and np.isfinite(hi))
+            out[n] = {"inside": ok and bool(lo <= theta[n] <= hi),
+                      "width": float(hi - lo) if ok else None}
     return out
 
 
@@ -435,16 +439,20 @@ def recording_coverage(name: str, truth: dict[str, Any], report: dict[str, Any] 
 
 def _group(recs: list[dict[str, Any]], key: str) -> dict[str, Any]:
     """Inside counts and mean widths over the coefficients of recs[i][key] (k_* and c_*
-    apart: theta is a fraction of ks, c_* is c / c_ref)."""
+    apart: theta is a fraction of ks, c_* is c / c_ref); 'no_interval' counts the
+    coefficients without a finite interval (left out of the widths)."""
     out: dict[str, Any] = {}
     for g in ("k", "c"):
         cells = [v for r in recs for n, v in (r.get(key) or {}).items() if n[0] == g]
+        widths = [v["width"] for v in cells if v["width"] is not None]
         out[f"{g}_inside"] = [sum(bool(v["inside"]) for v in cells), len(cells)]
-        out[f"{g}_width_mean"] = float(np.mean([v["width"] for v in cells])) if cells \
-            else None
+        out[f"{g}_width_mean"] = float(np.mean(widths)) if widths else None
+    out["no_interval"] = sum(v["width"] is None for r in recs
+                             for v in (r.get(key) or {}).values())
     out["width_mean"] = {n: float(np.mean(w)) for n in COEFFICIENTS
                          if (w := [r[key][n]["width"] for r in recs
-                                   if n in (r.get(key) or {})])}
+                                   if n in (r.get(key) or {})
+                                   and r[key][n]["width"] is not None])}
     return out
 
 
@@ -501,6 +509,7 @@ def coverage(out: Path, names: list[str]) -> dict[str, Any]:
         i = f.get("identify")
         idc = (f"{frac(i['k_inside'])} | {frac(i['c_inside'])} | {num(i['k_width_mean'])} | "
                f"{num(i['c_width_mean'])} | {i['inadequate']} ({i['adequacy_reported']})"
+               + (f" - {i['no_interval']} without an interval" if i["no_interval"] else "")
                if i else "- | - | - | - | -")
         lines.append(f"| {fam} | {f['recordings']} | {frac(f['k_inside'])} | "
                      f"{frac(f['c_inside'])} | {num(f['k_width_mean'])} | "

@@ -137,6 +137,8 @@ def test_an_interval_without_the_truth_counts_outside_with_its_width():
     assert cov["c_Ay"]["inside"]                         # closed interval: an end counts
     assert sum(v["inside"] for v in cov.values()) == 7
     assert fb.coefficient_coverage(TRUE8, {"kxy_D1": {"hdi90": [0, 1]}}) == {}
+    nan = fb.coefficient_coverage(TRUE8, _params(float("nan"), float("nan")))
+    assert all(not v["inside"] and v["width"] is None for v in nan.values())
 
 
 def test_only_a_failed_check_named_linearity_catches_a_nonlinearity():
