@@ -9,9 +9,24 @@ only by the scoring below, after the diagnosis.
 
     PYTHONPATH=. .venv/bin/python studies/foreign_benchmark.py --out runs/foreign \
         [--per-kind 4] [--kinds control,actuator_lag,...] [--seed 1] [--duration 2]
+        [--counts control=20,control_force=10,current_limit=6,seal=6,ks_drift=6]
+        [--identify]
 
-Resumable: rows already in OUT/rows.jsonl are kept (each recording has its own seed);
+``--counts`` alone chooses the kinds too (those it names). Resumable: rows already in
+OUT/rows.jsonl are kept (each recording has its own seed, from --seed, its kind and its
+number, so a name always means the same recording whatever else a run asks for);
 ``--redo NAMES`` drops the rows of those recordings first, so they are diagnosed again.
+
+Bearing-coefficient coverage (issue 27): per recording and per coefficient k_Ax..c_By,
+is the truth's theta inside the diagnosis' parameters_after hdi90, and how wide is it; per
+family (control, control_force, each in-library kind, pair, full_truth, pedestal, each
+issue-27 held-out family) the share inside, the mean widths, the verdicts and, from a
+check named 'linearity' (caught only when that check fails), the nonlinear recordings
+caught. Computed from the saved files (OUT/diagnoses, OUT/recordings/*.truth.json,
+OUT/identify), so that ``--summary-only`` scores an older run too. ``--identify`` also
+runs the product's identify (MAP + Laplace, all eight coefficients) on each recording
+diagnosed in this run and scores its intervals and its 'adequacy' block (if the product
+writes one). Writes OUT/coverage.json and OUT/coverage.md.
 A named unbalance is also scored by the diagnosis' balancing answer: the truth's
 equivalent in the two correction planes (balancing_truth: influence coefficients from the
 generator's own noise-free runs) inside each plane's 90 % credible ellipse.
@@ -25,6 +40,7 @@ import argparse
 import json
 import sys
 import time
+import zlib
 from pathlib import Path
 from typing import Any
 
@@ -42,7 +58,16 @@ from tests.foreign.plant import AXES
 
 DEFAULT_KINDS = ("control", "actuator_lag", "actuator_delay", "sensor_delay", "sensor_gain",
                  "cross_coupling", "unbalance", "actuator_2nd", "sensor_lag",
-                 "actuator_gain", "runout", "pair", "held_out", "full_truth")
+                 "actuator_gain", "runout", "pair", "held_out", "full_truth",
+                 "control_force", "current_limit", "seal", "ks_drift")
+"""The default kinds; a kind's position here is part of its recordings' seeds (new kinds
+are appended, so the older ones keep their recordings)."""
+
+NONLINEAR = {"current_limit"}
+"""Foreign effects that make the loop nonlinear (a failed 'linearity' check catches them)."""
+
+COEFFICIENTS = tuple(f"{g}_{a}" for g in "kc" for a in AXES)
+"""The eight bearing coefficients of the coverage table (the truth file's theta keys)."""
 
 IN_LIBRARY = {"actuator_lag", "actuator_2nd", "sensor_lag", "actuator_delay", "sensor_delay",
               "actuator_gain", "sensor_gain", "cross_coupling", "unbalance", "runout"}
@@ -218,11 +243,36 @@ def _controller_file(out: Path, dt: float) -> Path:
     return path
 
 
+def kind_number(kind: str) -> int:
+    """A kind's part of its recordings' seeds: its position in DEFAULT_KINDS (as before
+    issue 27 for the default list), else a CRC-32 of its name (e.g. 'pair:a+b')."""
+    return DEFAULT_KINDS.index(kind) if kind in DEFAULT_KINDS else zlib.crc32(kind.encode())
+
+
+def run_identify(csv: Path, path: Path) -> dict[str, Any]:
+    """The product's identify (MAP with its Laplace approximation) of the eight bearing
+    coefficients on a recording; its summary saved to ``path``. Returns {'seconds',
+    'error'} (the summary is scored from the file by :func:`coverage`)."""
+    from bayes_amb.inference.identify import IdentifyOptions, identify
+    t0 = time.perf_counter()
+    try:
+        res = identify(load_recording(csv), list(COEFFICIENTS),
+                       options=IdentifyOptions(map_only=True))
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(path, json.dumps(res.summary, default=float) + "\n")
+        error = None
+    except Exception as exc:  # a benchmark row, not a crash
+        error = f"{type(exc).__name__}: {exc}"
+    return {"seconds": time.perf_counter() - t0, "error": error}
+
+
 def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
-        counts: dict[str, int] | None = None, shard: tuple[int, int] = (0, 1)) -> None:
+        counts: dict[str, int] | None = None, shard: tuple[int, int] = (0, 1),
+        identify: bool = False) -> None:
     """Diagnose per_kind recordings of each kind (``counts`` overrides it per kind). With
     shard (i, n) only every n-th recording from the i-th on is done here, so that n
-    processes can share the work and one rows.jsonl (each row is one appended line)."""
+    processes can share the work and one rows.jsonl (each row is one appended line).
+    ``identify``: also run :func:`run_identify` on each."""
     out.mkdir(parents=True, exist_ok=True)
     rows_path = out / "rows.jsonl"
     done = set()
@@ -233,11 +283,11 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
     counts = counts or {}
     todo = [(i, j, kind) for i in range(max([per_kind, *counts.values()]))
             for j, kind in enumerate(kinds) if i < counts.get(kind, per_kind)]
-    for pos, (i, j, kind) in enumerate(todo):
+    for pos, (i, _, kind) in enumerate(todo):
         name = f"{kind}_{i:02d}"
         if name in done or pos % shard[1] != shard[0]:
             continue
-        rng = np.random.default_rng([seed, i, j])
+        rng = np.random.default_rng([seed, i, kind_number(kind)])
         spec = draw_case(kind, rng, controller_file=str(ctrl), duration_s=duration)
         paths = write_case(spec, out / "recordings", name, rng)
         t0, c0 = time.perf_counter(), time.process_time()
@@ -255,6 +305,8 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
             (out / "diagnoses").mkdir(exist_ok=True)
             write_text_atomic(out / "diagnoses" / f"{name}.json",
                               json.dumps(report, default=float) + "\n")
+        if identify:
+            row["identify"] = run_identify(paths["csv"], out / "identify" / f"{name}.json")
         with rows_path.open("a") as fh:
             fh.write(json.dumps(row, default=float) + "\n")
         sys.stderr.write(f"{name}: {row.get('verdict')} named={row.get('named')} "
@@ -331,19 +383,156 @@ def summarise(out: Path) -> dict[str, Any]:
         lines.append(f"- {k}: {v[0]}/{v[1]}" if isinstance(v, tuple) else f"- {k}: {v}")
     write_text_atomic(out / "summary.md", "\n".join(lines) + "\n")
     write_text_atomic(out / "summary.json", json.dumps(s, indent=1) + "\n")
+    coverage(out, [r["name"] for r in ok])
     return s
+
+
+# ------------------------------------------------------ bearing-coefficient coverage
+def family(kind: str) -> str:
+    """The coverage table's family of a case kind ('held_out' is the pedestal)."""
+    if kind == "held_out":
+        return "pedestal"
+    return "pair" if kind.startswith("pair") else kind
+
+
+def coefficient_coverage(theta: dict[str, float], params: dict[str, Any]
+                         ) -> dict[str, dict[str, float | bool]]:
+    """Per bearing coefficient in both: {'inside': truth in hdi90, 'width': hi - lo}
+    (``params``: a diagnosis' parameters_after or identify's summary 'parameters'). An
+    interval that is not finite (identify without a Laplace covariance gives NaN) counts
+    as outside, with width None."""
+    out: dict[str, dict[str, float | bool | None]] = {}
+    for n in COEFFICIENTS:
+        if n in theta and n in params:
+            lo, hi = (float(v) if v is not None else np.nan for v in params[n]["hdi90"])
+            ok = bool(np.isfinite(lo) and np.isfinite(hi))
+            out[n] = {"inside": ok and bool(lo <= theta[n] <= hi),
+                      "width": float(hi - lo) if ok else None}
+    return out
+
+
+def linearity_failed(report: dict[str, Any]) -> bool:
+    """The diagnosis has a check named 'linearity' and it failed (caught only then)."""
+    return any(c.get("check") == "linearity" and c.get("ok") is False
+               for c in report.get("checks", []))
+
+
+def recording_coverage(name: str, truth: dict[str, Any], report: dict[str, Any] | None,
+                       ident: dict[str, Any] | None) -> dict[str, Any]:
+    """One recording's coverage entry (diagnosis and, if run, identify)."""
+    rec: dict[str, Any] = {
+        "name": name, "family": family(truth["kind"]),
+        "nonlinear": any(e["name"] in NONLINEAR for e in truth["effects"]),
+        "clipped_share": truth.get("draws", {}).get("clipped_share")}
+    if report is not None:
+        rec.update(verdict=report.get("verdict"), linearity_failed=linearity_failed(report),
+                   coefficients=coefficient_coverage(truth["theta"],
+                                                     report.get("parameters_after", {})))
+    if ident is not None:
+        adequacy = ident.get("adequacy")
+        rec["identify"] = {
+            "coefficients": coefficient_coverage(truth["theta"], ident.get("parameters", {})),
+            "adequacy": adequacy,
+            "adequate": adequacy.get("adequate") if isinstance(adequacy, dict) else None}
+    return rec
+
+
+def _group(recs: list[dict[str, Any]], key: str) -> dict[str, Any]:
+    """Inside counts and mean widths over the coefficients of recs[i][key] (k_* and c_*
+    apart: theta is a fraction of ks, c_* is c / c_ref); 'no_interval' counts the
+    coefficients without a finite interval (left out of the widths)."""
+    out: dict[str, Any] = {}
+    for g in ("k", "c"):
+        cells = [v for r in recs for n, v in (r.get(key) or {}).items() if n[0] == g]
+        widths = [v["width"] for v in cells if v["width"] is not None]
+        out[f"{g}_inside"] = [sum(bool(v["inside"]) for v in cells), len(cells)]
+        out[f"{g}_width_mean"] = float(np.mean(widths)) if widths else None
+    out["no_interval"] = sum(v["width"] is None for r in recs
+                             for v in (r.get(key) or {}).values())
+    out["width_mean"] = {n: float(np.mean(w)) for n in COEFFICIENTS
+                         if (w := [r[key][n]["width"] for r in recs
+                                   if n in (r.get(key) or {})
+                                   and r[key][n]["width"] is not None])}
+    return out
+
+
+def coverage(out: Path, names: list[str]) -> dict[str, Any]:
+    """The bearing-coefficient coverage table of the recordings ``names`` from the saved
+    truth files, diagnoses and identify summaries; writes OUT/coverage.json and .md."""
+    recs = []
+    for name in names:
+        tpath = out / "recordings" / f"{name}.truth.json"
+        if not tpath.is_file():
+            continue
+
+        def load(p: Path) -> dict[str, Any] | None:
+            return json.loads(p.read_text()) if p.is_file() else None
+
+        recs.append(recording_coverage(name, json.loads(tpath.read_text()),
+                                       load(out / "diagnoses" / f"{name}.json"),
+                                       load(out / "identify" / f"{name}.json")))
+    fams: dict[str, Any] = {}
+    for fam in dict.fromkeys(r["family"] for r in recs):
+        rf = [r for r in recs if r["family"] == fam]
+        verdicts: dict[str, int] = {}
+        for r in rf:
+            verdicts[str(r.get("verdict"))] = verdicts.get(str(r.get("verdict")), 0) + 1
+        fams[fam] = {"recordings": len(rf), **_group(rf, "coefficients"),
+                     "verdicts": verdicts,
+                     "linearity_failed": [sum(bool(r.get("linearity_failed")) for r in rf),
+                                          len(rf)],
+                     "nonlinear": sum(r["nonlinear"] for r in rf)}
+        ri = [r["identify"] for r in rf if "identify" in r]
+        if ri:
+            fams[fam]["identify"] = {
+                "recordings": len(ri), **_group(ri, "coefficients"),
+                "adequacy_reported": sum(r["adequacy"] is not None for r in ri),
+                "inadequate": sum(r["adequate"] is False for r in ri)}
+    result = {"format": "foreign-coverage/1", "families": fams, "recordings": recs}
+    write_text_atomic(out / "coverage.json", json.dumps(result, indent=1) + "\n")
+
+    def frac(v: list[int]) -> str:
+        return f"{v[0]}/{v[1]}"
+
+    def num(v: float | None) -> str:
+        return "-" if v is None else f"{v:.3g}"
+
+    lines = ["Bearing-coefficient coverage: truth inside the 90 % interval (k_*: theta, a "
+             "fraction of ks; c_*: c / c_ref), mean interval widths, verdicts; "
+             "'linearity failed': a failed check named linearity.", "",
+             "| family | n | k inside | c inside | width k | width c | verdicts "
+             "| linearity failed | identify k inside | identify c inside | identify width k "
+             "| identify width c | inadequate (reported) |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for fam, f in fams.items():
+        v = ", ".join(f"{k} {n}" for k, n in f["verdicts"].items())
+        i = f.get("identify")
+        idc = (f"{frac(i['k_inside'])} | {frac(i['c_inside'])} | {num(i['k_width_mean'])} | "
+               f"{num(i['c_width_mean'])} | {i['inadequate']} ({i['adequacy_reported']})"
+               + (f" - {i['no_interval']} without an interval" if i["no_interval"] else "")
+               if i else "- | - | - | - | -")
+        lines.append(f"| {fam} | {f['recordings']} | {frac(f['k_inside'])} | "
+                     f"{frac(f['c_inside'])} | {num(f['k_width_mean'])} | "
+                     f"{num(f['c_width_mean'])} | {v} | {frac(f['linearity_failed'])} | "
+                     f"{idc} |")
+    write_text_atomic(out / "coverage.md", "\n".join(lines) + "\n")
+    return result
 
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--out", required=True, type=Path)
-    ap.add_argument("--kinds", default=",".join(DEFAULT_KINDS))
+    ap.add_argument("--kinds", default=None,
+                    help="comma-separated kinds (default: those of --counts, else "
+                         "DEFAULT_KINDS)")
     ap.add_argument("--per-kind", type=int, default=4)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--duration", type=float, default=2.0)
     ap.add_argument("--counts", default="", help="per-kind counts, e.g. control=12,pair=8")
     ap.add_argument("--shard", default="0/1", help="i/n: this process does every n-th")
     ap.add_argument("--summary-only", action="store_true")
+    ap.add_argument("--identify", action="store_true",
+                    help="also run identify (MAP + Laplace, eight coefficients) on each")
     ap.add_argument("--redo", default="",
                     help="recordings to diagnose again (names, e.g. unbalance_00,pair_01): "
                          "their rows are dropped first")
@@ -358,8 +547,10 @@ def main(argv: list[str] | None = None) -> int:
             ap.error("--redo runs as one process (--shard 0/1): shards would drop each "
                      "other's new rows")
         drop_rows(a.out, {name for name in a.redo.split(",") if name})
-    run(a.out, [k for k in a.kinds.split(",") if k], a.per_kind, a.seed, a.duration,
-        counts, (i, n))
+    kinds = (a.kinds.split(",") if a.kinds is not None
+             else list(counts) if counts else list(DEFAULT_KINDS))
+    run(a.out, [k for k in kinds if k], a.per_kind, a.seed, a.duration, counts, (i, n),
+        a.identify)
     return 0
 
 

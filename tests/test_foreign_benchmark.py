@@ -117,3 +117,90 @@ def test_redo_drops_only_the_named_rows(tmp_path):
     fb.drop_rows(tmp_path, {"b_00"})
     assert [json.loads(line)["name"] for line in
             (tmp_path / "rows.jsonl").read_text().splitlines()] == ["a_00", "c_00"]
+
+
+# ------------------------------------------------ bearing-coefficient coverage (issue 27)
+AXES = ("Ax", "Ay", "Bx", "By")
+TRUE8 = {**{f"k_{a}": 0.1 for a in AXES}, **{f"c_{a}": 0.2 for a in AXES}}
+
+
+def _params(lo, hi, **override):
+    """hdi90 [lo, hi] for every coefficient, [lo, hi] pairs in override per name."""
+    return {n: {"hdi90": list(override.get(n, (lo, hi)))} for n in TRUE8}
+
+
+def test_an_interval_without_the_truth_counts_outside_with_its_width():
+    cov = fb.coefficient_coverage(TRUE8, _params(0.05, 0.25, k_Bx=(0.11, 0.13),
+                                                 c_Ay=(0.2, 0.2)))
+    assert set(cov) == set(TRUE8)
+    assert not cov["k_Bx"]["inside"] and abs(cov["k_Bx"]["width"] - 0.02) < 1e-15
+    assert cov["c_Ay"]["inside"]                         # closed interval: an end counts
+    assert sum(v["inside"] for v in cov.values()) == 7
+    assert fb.coefficient_coverage(TRUE8, {"kxy_D1": {"hdi90": [0, 1]}}) == {}
+    nan = fb.coefficient_coverage(TRUE8, _params(float("nan"), float("nan")))
+    assert all(not v["inside"] and v["width"] is None for v in nan.values())
+
+
+def test_only_a_failed_check_named_linearity_catches_a_nonlinearity():
+    def rep(*checks):
+        return {"checks": [{"check": n, "ok": ok} for n, ok in checks]}
+    assert fb.linearity_failed(rep(("linearity", False), ("offsets", True)))
+    assert not fb.linearity_failed(rep(("linearity", True)))
+    assert not fb.linearity_failed(rep(("stationarity", False)))
+    assert not fb.linearity_failed({})
+
+
+def test_families_of_the_coverage_table():
+    assert [fb.family(k) for k in ("held_out", "pair", "pair:sensor_lag+runout",
+                                   "control_force", "seal", "actuator_lag")] == \
+        ["pedestal", "pair", "pair", "control_force", "seal", "actuator_lag"]
+
+
+def test_old_kinds_keep_their_seeds():
+    before = ("control", "actuator_lag", "actuator_delay", "sensor_delay", "sensor_gain",
+              "cross_coupling", "unbalance", "actuator_2nd", "sensor_lag",
+              "actuator_gain", "runout", "pair", "held_out", "full_truth")
+    assert fb.DEFAULT_KINDS[:len(before)] == before
+    assert [fb.kind_number(k) for k in before] == list(range(len(before)))
+    assert fb.kind_number("pair:a+b") == fb.kind_number("pair:a+b") != fb.kind_number("pair")
+
+
+def test_the_coverage_table_counts_from_the_saved_files(tmp_path):
+    (tmp_path / "recordings").mkdir()
+    (tmp_path / "diagnoses").mkdir()
+    (tmp_path / "identify").mkdir()
+    recs = {  # name: (kind, effects, diagnosis interval, linearity check, identify)
+        "control_00": ("control", [], _params(0.0, 0.3), None, None),
+        "control_01": ("control", [], _params(0.0, 0.3, k_Ax=(0.2, 0.3)), None,
+                       {"parameters": _params(0.09, 0.25, c_By=(0.0, 0.1))}),
+        "current_limit_00": ("current_limit", [{"name": "current_limit", "params": {}}],
+                             _params(0.0, 0.3), ("linearity", False),
+                             {"parameters": _params(0.0, 1.0),
+                              "adequacy": {"adequate": False}}),
+        "current_limit_01": ("current_limit", [{"name": "current_limit", "params": {}}],
+                             _params(0.3, 0.5), ("linearity", True), None),
+    }
+    for name, (kind, eff, par, check, ident) in recs.items():
+        (tmp_path / "recordings" / f"{name}.truth.json").write_text(json.dumps(
+            {"kind": kind, "theta": TRUE8, "effects": eff,
+             "draws": {"clipped_share": 0.03} if eff else {}}))
+        rep = {"verdict": "no mismatch" if kind == "control" else "unexplained",
+               "parameters_after": par,
+               "checks": [{"check": check[0], "ok": check[1]}] if check else []}
+        (tmp_path / "diagnoses" / f"{name}.json").write_text(json.dumps(rep))
+        if ident:
+            (tmp_path / "identify" / f"{name}.json").write_text(json.dumps(ident))
+    out = fb.coverage(tmp_path, list(recs))
+    c, n = out["families"]["control"], out["families"]["current_limit"]
+    assert c["recordings"] == 2 and c["k_inside"] == [7, 8] and c["c_inside"] == [8, 8]
+    assert abs(c["k_width_mean"] - (7 * 0.3 + 0.1) / 8) < 1e-12
+    assert c["verdicts"] == {"no mismatch": 2} and c["linearity_failed"] == [0, 2]
+    assert c["identify"]["recordings"] == 1 and c["identify"]["k_inside"] == [4, 4]
+    assert c["identify"]["c_inside"] == [3, 4] and c["identify"]["adequacy_reported"] == 0
+    assert n["linearity_failed"] == [1, 2] and n["nonlinear"] == 2
+    assert n["k_inside"] == [4, 8] and n["c_inside"] == [4, 8]
+    assert n["identify"]["inadequate"] == 1 and n["identify"]["adequacy_reported"] == 1
+    md = (tmp_path / "coverage.md").read_text()
+    assert "| current_limit | 2 | 4/8 | 4/8 |" in md
+    assert json.loads((tmp_path / "coverage.json").read_text())["families"].keys() == \
+        {"control", "current_limit"}

@@ -20,7 +20,7 @@ import scipy.linalg as sla
 import scipy.signal as sps
 
 from bayes_amb.rig import load_rig
-from tests.foreign import CaseSpec, Effect, Habits, read_controller, rotor
+from tests.foreign import CaseSpec, Effect, Habits, closed_loop, read_controller, rotor
 from tests.foreign.cases import simulate
 from tests.foreign.habits import habit_signals
 from tests.foreign.plant import AXES, dof
@@ -379,3 +379,230 @@ def test_line_phases_refer_to_the_start_of_the_record(controller_file):
     tail = slice(2000, None)
     assert np.abs(rec.y[tail] - rest[tail]).max() < 1e-6 * np.abs(rest[tail]).max()
     assert np.abs(rest[tail]).max() > 1e-8
+
+
+# ------------------------------------------------- held-out families of issue 27
+def _reference_loop(plant, ctrl, eta, force=None, i_max=np.inf, sub=4):
+    """Reference for the nonlinear loop and the disc forces, written apart from
+    loop.run_segments: no delays; the controller sample by sample, the amplifier's current
+    clip(w, +-i_max) held over the sample and the plant integrated on a grid sub times
+    finer, the disc force (N, 4) held over each sample like the current."""
+    n, dt = plant.A.shape[0], ctrl.dt
+    B = np.hstack([plant.B, plant.F])
+    M = np.zeros((n + 8, n + 8))
+    M[:n, :n], M[:n, n:] = plant.A * dt / sub, B * dt / sub
+    E = sla.expm(M)
+    Ph, Gh = E[:n, :n], E[:n, n:]
+    x, xk = plant.state_at(0.0), np.zeros(ctrl.Ak.shape[0])
+    y = np.zeros((eta.shape[0], 4))
+    for k in range(eta.shape[0]):
+        y[k] = plant.C @ x
+        w = ctrl.Cu @ xk + ctrl.Duy @ y[k] + ctrl.Due @ eta[k]
+        xk = ctrl.Ak @ xk + ctrl.By @ y[k] + ctrl.Be @ eta[k]
+        v = np.concatenate([np.clip(w, -i_max, i_max),
+                            np.zeros(4) if force is None else force[k]])
+        for _ in range(sub):
+            x = Ph @ x + Gh @ v
+    return y
+
+
+def _limit(i_max, recorded="command"):
+    return Effect("current_limit", {"i_max_a": i_max, "recorded": recorded,
+                                    "clipped_share_target": 0.03})
+
+
+def test_a_current_limit_clips_the_amplifier_as_a_reference_loop_does(controller_file):
+    """eta 0.3 A with the limit at 0.35 A: the loop (open-loop form with the clip) agrees
+    with a plain reference recursion, and differs from the linear loop."""
+    from tests.foreign.cases import clean_response, plant_of
+    rig = load_rig()
+    ctrl = read_controller(controller_file)
+    spec = _spec(controller_file)
+    eta = 0.3 * np.random.default_rng(20).choice([-1.0, 1.0], size=(800, 4))
+    mine = clean_response(spec, ctrl, eta, rig, (_limit(0.35),))
+    ref = _reference_loop(plant_of(spec, rig, ()), ctrl, eta, i_max=0.35)
+    lin = clean_response(spec, ctrl, eta, rig, ())
+    scale = np.abs(ref).max()
+    assert np.abs(mine - ref).max() < 1e-9 * scale
+    assert np.abs(lin - ref).max() > 1e-2 * scale          # the limit does act
+
+
+def test_an_unreachable_current_limit_is_the_linear_run(controller_file):
+    """All habits on (noise, offsets, r2, lines) and a fractional actuator delay: a limit
+    of 1e6 A gives the linear run to 1e-12 (the open-loop form Aop + Bw Cw = Acl)."""
+    hab = dict(noise_rms_m=5e-8, noise_ar=0.7, sensor_offset_m=(1e-6, -2e-6, 0.0, 3e-6),
+               amp_offset_a=(0.02, 0.0, -0.01, 0.0), r2_rms_a=0.01, burn_in_s=0.05,
+               mains_m={50.0: 3e-8})
+    delay = Effect("actuator_delay", {"delay_s": 1.3e-4})
+    runs = [simulate(replace(_spec(controller_file, **hab), duration_s=0.2, effects=eff),
+                     None, np.random.default_rng(21))
+            for eff in ((delay,), (delay, _limit(1e6)))]
+    for a in ("y", "u", "eps"):
+        x0, x1 = getattr(runs[0], a), getattr(runs[1], a)
+        assert np.abs(x1 - x0).max() <= 1e-12 * np.abs(x0).max(), a
+    assert runs[1].draws["clipped_share"] == 0.0
+
+
+@pytest.mark.parametrize("recorded", ["command", "coil"])
+def test_the_current_limit_is_calibrated_to_its_clipped_share(controller_file, recorded):
+    from tests.foreign.cases import calibrate_current_limit
+    rig = load_rig()
+    ctrl = read_controller(controller_file)
+    spec = replace(_spec(controller_file, noise_rms_m=5e-8, amp_offset_a=(0.03, 0, 0, 0),
+                         burn_in_s=0.05),
+                   duration_s=0.3, effects=(_limit(None, recorded),))
+    rng = np.random.default_rng(22)
+    state = rng.bit_generator.state
+    spec, out = calibrate_current_limit(spec, ctrl, rng, rig)
+    assert rng.bit_generator.state == state                 # rng not advanced
+    assert abs(out["clipped_share"] - 0.03) <= 0.15 * 0.03
+    sim = simulate(spec, ctrl, rng, rig)
+    i_max = spec.effects[0].params["i_max_a"]
+    assert sim.draws["clipped_share"] == out["clipped_share"]   # the record's own draws
+    assert np.mean(np.abs(sim.w) > i_max) == sim.draws["clipped_share"]
+    if recorded == "coil":      # the DAQ's current sensor: never beyond the limit
+        assert np.array_equal(sim.u, np.clip(sim.w, -i_max, i_max))
+    else:                       # the command: beyond it exactly where it clips
+        assert np.mean(np.abs(sim.u) > i_max) > 0.005
+        assert np.abs(sim.u).max() > i_max
+
+
+def _seal(K=0.0, k=0.0, C=0.0, c=0.0, node="D2"):
+    return Effect("seal", {"node": node, "k_direct_nm": K, "k_cross_nm": k,
+                           "c_direct_nsm": C, "c_cross_nsm": c})
+
+
+def test_a_seal_is_the_node_impedance_of_its_coefficients():
+    """Full truth: G_seal = G0 - G_yn Z (I + G_nn Z)^-1 G_nu (a force -Z q at the node fed
+    back through the seal-free plant), Z = [[K + sC, k + sc], [-(k + sc), K + sC]]."""
+    from tests.foreign.plant import node_of
+    rig = load_rig()
+    K, k, C, c = 2e5, 6e4, 40.0, 8.0
+    p0, p1 = _plant((), truth="full"), _plant((_seal(K, k, C, c, node=20),), truth="full")
+    R = rotor(rig, rig.nominal_speed_rpm, "full")
+    n = node_of(rig, 20)
+    Fn = np.zeros((p0.A.shape[0], 2))
+    Fn[:R.n] = R.force[:, [dof(n, "x"), dof(n, "y")]]
+    Cn = np.zeros((2, p0.A.shape[0]))
+    Cn[:, :R.n] = R.disp[[dof(n, "x"), dof(n, "y")]]
+    change = []
+    for f_hz in (20.0, 180.0, 900.0):
+        s = 2j * np.pi * f_hz
+        G0 = _frf(p0.A, p0.B, p0.C, f_hz)
+        Gyn, Gnn, Gnu = (_frf(p0.A, b, cc, f_hz) for b, cc in
+                         ((Fn, p0.C), (Fn, Cn), (p0.B, Cn)))
+        Z = np.array([[K + s * C, k + s * c], [-(k + s * c), K + s * C]])
+        expect = G0 - Gyn @ Z @ np.linalg.solve(np.eye(2) + Gnn @ Z, Gnu)
+        G1 = _frf(p1.A, p1.B, p1.C, f_hz)
+        # full FE model (condition ~1e15): the formula loses ~1e-8 relative
+        assert np.abs(G1 - expect).max() < 1e-6 * np.abs(G0).max()
+        change.append(np.abs(G1 - G0).max() / np.abs(G0).max())
+    assert max(change) > 1e-3                                # the seal does matter
+
+
+@pytest.mark.parametrize("coef, sign", [("C", -1.0), ("k", +1.0)])
+def test_seal_energy_direct_damping_dissipates_cross_coupling_feeds_forward_whirl(coef, sign):
+    """The seal force recovered from the state matrix (full truth): with C alone its power
+    f.v on the node is -C |v|^2 <= 0 for any motion; with k alone, on a forward circular
+    whirl (x, y) = r (cos, sin)(w t), it is +k r^2 w > 0 (the destabilising sign)."""
+    from tests.foreign.plant import node_of
+    rig = load_rig()
+    e = _seal(C=50.0) if coef == "C" else _seal(k=5e4)
+    p0, p1 = _plant((), truth="full", changed=False), _plant((e,), truth="full", changed=False)
+    R = rotor(rig, rig.nominal_speed_rpm, "full")
+    n = R.n
+    F = np.linalg.lstsq(R.force, p1.A[:n, :n] - p0.A[:n, :n], rcond=None)[0]   # force/state
+    j = [dof(node_of(rig, "D2"), a) for a in "xy"]
+    rng = np.random.default_rng(23)
+    for _ in range(5):
+        if coef == "C":
+            x = rng.standard_normal(n)
+        else:                       # position on a forward whirl, velocity along it
+            r, w, t = 1e-5, 2 * np.pi * 150.0, rng.uniform(0, 1e-2)
+            x = np.zeros(n)
+            x[j] = r * np.array([np.cos(w * t), np.sin(w * t)])
+            x[n // 2 + np.array(j)] = r * w * np.array([-np.sin(w * t), np.cos(w * t)])
+        f, v = F @ x, R.vel @ x
+        power = f[j] @ v[j]
+        expect = -50.0 * v[j] @ v[j] if coef == "C" else 5e4 * (1e-5) ** 2 * 2 * np.pi * 150.0
+        assert np.sign(power) == sign
+        assert abs(power - expect) < 1e-8 * abs(expect)
+        assert np.abs(np.delete(f, j)).max() < 1e-8 * np.abs(f[j]).max()
+
+
+def test_ks_drift_is_a_staircase_centred_on_theta(controller_file):
+    """Each step's plant is the constant plant at theta + rate (mid-point - t_ref); the
+    steps' mean over the record is theta; before the first switch the drifting run is the
+    constant run at the first step's value; rate 0 is the plain run."""
+    from tests.foreign.cases import clean_response, loops, plant_of
+    rig = load_rig()
+    ctrl = read_controller(controller_file)
+    spec = replace(_spec(controller_file), duration_s=0.2)
+    d = Effect("ks_drift", {"where": "A", "rate_per_s": 0.3, "t_ref_s": 0.1,
+                            "segment_s": 0.025})
+    segs, _ = loops(spec, rig, ctrl, 0, 2000, (d,))
+    assert [k for k, _ in segs] == list(range(0, 2000, 250))
+    shifts = 0.3 * ((np.arange(8) + 0.5) * 0.025 - 0.1)
+    assert abs(np.mean(shifts)) < 1e-15
+    for (_, cl), sh in zip(segs, shifts, strict=True):
+        kt = {a: v + (sh if a[0] == "A" else 0.0) for a, v in spec.k_theta.items()}
+        want = closed_loop(plant_of(replace(spec, k_theta=kt), rig, ()), ctrl)
+        assert np.array_equal(cl.Acl, want.Acl)
+    eta = 0.3 * np.random.default_rng(24).choice([-1.0, 1.0], size=(2000, 4))
+    y = clean_response(spec, ctrl, eta, rig, (d,))
+    kt0 = {a: v + (shifts[0] if a[0] == "A" else 0.0) for a, v in spec.k_theta.items()}
+    y0 = clean_response(replace(spec, k_theta=kt0), ctrl, eta, rig, ())
+    assert np.array_equal(y[:250], y0[:250])
+    assert np.abs(y[250:] - y0[250:]).max() > 1e-3 * np.abs(y0).max()
+    flat = Effect("ks_drift", {**d.params, "rate_per_s": 0.0})
+    assert np.array_equal(clean_response(spec, ctrl, eta, rig, (flat,)),
+                          clean_response(spec, ctrl, eta, rig, ()))
+
+
+def test_the_process_force_is_band_limited_with_its_rms():
+    h = Habits(noise_rms_m=0.0, force_rms_n=7.5, force_band_hz=(12.0, 250.0),
+               force_at=("D2",))
+    sig, _ = habit_signals(h, 40000, 1e-4, np.random.default_rng(25))
+    f = sig["force"]
+    assert np.all(f[:, :2] == 0.0)                          # D1 not forced
+    assert np.allclose(np.sqrt(np.mean(f[:, 2:] ** 2, axis=0)), 7.5, rtol=1e-12)
+    fr, p = sps.welch(f[:, 2:], fs=1e4, nperseg=4096, axis=0)
+    p = p.mean(axis=1)
+    inside = p[(fr > 30) & (fr < 200)].mean()
+    assert p[(fr > 1500)].max() < 1e-4 * inside
+    assert p[(fr > 0) & (fr < 3)].max() < 1e-2 * inside
+    assert abs(np.corrcoef(f[:, 2], f[:, 3])[0, 1]) < 0.05  # independent axes
+    assert habit_signals(replace(h, force_rms_n=0.0), 100, 1e-4,
+                         np.random.default_rng(0))[0]["force"] is None
+
+
+def test_the_process_force_acts_at_its_disc_as_a_reference_loop_does(controller_file):
+    from tests.foreign.cases import plant_of
+    from tests.foreign.loop import run_segments
+    rig = load_rig()
+    ctrl = read_controller(controller_file)
+    spec = _spec(controller_file)
+    plant = plant_of(spec, rig, ())
+    cl = closed_loop(plant, ctrl)
+    eta = 0.3 * np.random.default_rng(26).choice([-1.0, 1.0], size=(600, 4))
+    force = np.zeros((600, 4))
+    force[:, 0] = 5.0 * np.random.default_rng(27).standard_normal(600)   # D1 x
+    z = np.zeros_like(eta)
+    mine = run_segments([(0, cl)], np.hstack([eta, z, z]), cl.initial_state(plant.x0),
+                        force=force).y
+    ref = _reference_loop(plant, ctrl, eta, force=force)
+    no_force = _reference_loop(plant, ctrl, eta)
+    scale = np.abs(ref).max()
+    assert np.abs(mine - ref).max() < 1e-9 * scale
+    assert np.abs(ref - no_force).max() > 1e-3 * scale
+
+
+def test_new_kinds_draw_their_family():
+    from tests.foreign import draw_case
+    for kind, name in (("current_limit", "current_limit"), ("seal", "seal"),
+                       ("ks_drift", "ks_drift"), ("pedestal", "pedestal")):
+        spec = draw_case(kind, np.random.default_rng(28))
+        assert [e.name for e in spec.effects] == [name]
+    spec = draw_case("control_force", np.random.default_rng(29))
+    assert not spec.effects and 2.5 <= spec.habits.force_rms_n <= 12.5
+    assert draw_case("control", np.random.default_rng(30)).habits.force_rms_n == 0.0

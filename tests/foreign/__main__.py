@@ -3,9 +3,12 @@
     bayes-amb controller --dt 1e-4 --export ctrl.json
     python -m tests.foreign OUT_DIR --controller ctrl.json [--seed 1] [--scale 1]
 
-The default suite has 70 recordings: 10 controls, 4 of each of the 10 in-family single
-effects, 10 pairs, 6 held-out (pedestal) and 4 full-truth; ``--scale`` multiplies every
-count. OUT_DIR/index.json lists them with their effects and concealments.
+The default suite has 90 recordings: 10 controls, 4 of each of the 10 in-family single
+effects, 10 pairs, 6 held-out (pedestal), 4 full-truth, then (issue 27) 5 controls with a
+process force (control_force) and 5 of each held-out family current_limit, seal and
+ks_drift; ``--scale`` multiplies every count. The first 70 are drawn as before (each
+recording's seed is spawned by its position). OUT_DIR/index.json lists them with their
+effects and concealments.
 """
 
 from __future__ import annotations
@@ -15,7 +18,8 @@ import argparse
 from tests.foreign.cases import IN_FAMILY, write_suite
 
 DEFAULT_SUITE = {"control": 10, **dict.fromkeys(IN_FAMILY, 4), "pair": 10, "held_out": 6,
-                 "full_truth": 4}
+                 "full_truth": 4, "control_force": 5, "current_limit": 5, "seal": 5,
+                 "ks_drift": 5}
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -24,16 +24,17 @@ from numpy.typing import NDArray
 
 from bayes_amb.rig import Rig, load_rig
 from tests.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
-from tests.foreign.habits import Habits, draw_habits, habit_signals
-from tests.foreign.loop import Controller, closed_loop, read_controller, run
+from tests.foreign.habits import Habits, draw_force, draw_habits, habit_signals
+from tests.foreign.loop import ClosedLoop, Controller, closed_loop, read_controller, run_segments
 from tests.foreign.plant import AXES, bearing_changes, rotor
 from tests.foreign.write import write_recording
 
 IN_FAMILY = tuple(n for n in EFFECT_PARAMS if n not in HELD_OUT)
-"""Single effects the benchmark draws as kinds (besides 'control', 'pair', 'held_out',
-'full_truth' and 'bending')."""
+"""Single effects the benchmark draws as kinds (besides 'control', 'control_force', 'pair',
+the held-out effects, 'held_out' (= 'pedestal'), 'full_truth' and 'bending')."""
 
-KINDS = ("control", *IN_FAMILY, "pair", "held_out", "full_truth", "bending")
+KINDS = ("control", "control_force", *IN_FAMILY, "pair", "held_out", *HELD_OUT,
+         "full_truth", "bending")
 
 
 @dataclass(frozen=True)
@@ -72,8 +73,11 @@ class CaseSpec:
 
 @dataclass(frozen=True)
 class Simulated:
-    """A simulated record (recorded part only): y_m (N, 4) m, u (N, 4) A, eta (N, 4) A,
-    eps (N, 4) m (the controller's innovation output), noise (N, 4) m, draws (dict)."""
+    """A simulated record (recorded part only): y_m (N, 4) m, u (N, 4) A (what the DAQ
+    records: the controller's command, or with a ``current_limit`` recording 'coil' the
+    coil current), eta (N, 4) A, eps (N, 4) m (the controller's innovation output), noise
+    (N, 4) m, draws (dict; with a current limit 'clipped_share', the share of samples and
+    channels at the limit), w (N, 4) A the total commanded current (command + r2 + offset)."""
 
     y: NDArray
     u: NDArray
@@ -81,6 +85,7 @@ class Simulated:
     eps: NDArray
     noise: NDArray
     draws: dict[str, Any]
+    w: NDArray | None = None
 
 
 def _controller(spec: CaseSpec, controller: Controller | str | os.PathLike | None
@@ -104,6 +109,40 @@ def plant_of(spec: CaseSpec, rig: Rig, effects: tuple[Effect, ...] | None = None
                        spec.speed_rpm_true, spec.k_theta)
 
 
+def loops(spec: CaseSpec, rig: Rig, ctrl: Controller, k0: int, n: int,
+          effects: tuple[Effect, ...] | None = None, truth: str | None = None
+          ) -> tuple[list[tuple[int, ClosedLoop]], Any]:
+    """The closed loop(s) of a case over n samples whose first is at t = k0 dt, and the
+    plant (of the first step). One loop, unless a ``ks_drift`` makes the plant vary: then
+    a staircase, step j covering t in [j, j + 1) segment_s with ks_true at its mid-point,
+    (1 - theta - rate ((j + 1/2) segment_s - t_ref)) ks on the drifting axes."""
+    effects = spec.effects if effects is None else effects
+    drift = [e for e in effects if e.name == "ks_drift"]
+    if not drift:
+        plant = plant_of(spec, rig, effects, truth)
+        return [(0, closed_loop(plant, ctrl))], plant
+    if len(drift) > 1:
+        raise ValueError(f"one ks_drift per case, got {len(drift)}")
+    p = drift[0].params
+    t = (k0 + np.arange(n)) * spec.dt
+    step = np.floor(t / p["segment_s"] + 1e-9).astype(int)
+    starts = np.flatnonzero(np.diff(step, prepend=step[0] - 1))
+    out, plant0 = [], None
+    for k in starts:
+        mid = (step[k] + 0.5) * p["segment_s"]
+        shift = p["rate_per_s"] * (mid - p["t_ref_s"])
+        k_theta = {a: v + (shift if a in _axes(p["where"]) else 0.0)
+                   for a, v in spec.k_theta.items()}
+        plant = plant_of(replace(spec, k_theta=k_theta), rig, effects, truth)
+        plant0 = plant0 or plant
+        out.append((int(k), closed_loop(plant, ctrl)))
+    return out, plant0
+
+
+def _axes(where: str) -> tuple[str, ...]:
+    return AXES if where == "all" else tuple(a for a in AXES if a[0] == where)
+
+
 def simulate(spec: CaseSpec, controller: Controller | str | None, rng: np.random.Generator,
              rig: Rig | None = None) -> Simulated:
     """Run a case: burn-in with everything running, then the recorded part."""
@@ -111,30 +150,42 @@ def simulate(spec: CaseSpec, controller: Controller | str | None, rng: np.random
     ctrl = _controller(spec, controller)
     if abs(ctrl.dt - spec.dt) > 1e-12 * spec.dt:
         raise ValueError(f"controller dt {ctrl.dt} differs from the case dt {spec.dt}")
-    plant = plant_of(spec, rig)
-    cl = closed_loop(plant, ctrl)
     n_rec = round(spec.duration_s / spec.dt)
     n_burn = round(spec.habits.burn_in_s / spec.dt)
+    segs, plant = loops(spec, rig, ctrl, -n_burn, n_burn + n_rec)
     sig, draws = habit_signals(spec.habits, n_burn + n_rec, spec.dt, rng, -n_burn * spec.dt)
     e = np.hstack([sig["eta"], sig["w_add"], sig["m"]])
     # the simulation starts at t = -burn-in: the record starts at t = 0, where the line
     # phases of the truth refer; the first state is sampled sensor_delay_s earlier still
     x0 = plant.state_at(-n_burn * spec.dt - plant.sensor_delay_s)
-    y, u, eps, _ = run(cl, e, cl.initial_state(x0))
+    r = run_segments(segs, e, segs[0][1].initial_state(x0), force=sig["force"],
+                     i_max_a=plant.i_max_a)
     keep = slice(n_burn, None)
     draws["burn_in_samples"] = n_burn
-    return Simulated(y[keep], u[keep], sig["eta"][keep], eps[keep], sig["noise"][keep], draws)
+    u = r.u
+    limit = [e for e in spec.effects if e.name == "current_limit"]
+    if np.isfinite(plant.i_max_a):
+        draws["clipped_share"] = float(np.mean(np.abs(r.w[keep]) > plant.i_max_a))
+        if limit and limit[0].params["recorded"] == "coil":
+            u = r.coil
+    if sig["force"] is not None:
+        f = sig["force"][keep]
+        on = np.any(f != 0, axis=0)
+        draws["force_rms_n"] = np.sqrt(np.mean(f[:, on] ** 2, axis=0)).tolist()
+        draws["force_equivalent_current_a"] = (np.array(draws["force_rms_n"]) / rig.ki).tolist()
+    return Simulated(r.y[keep], u[keep], sig["eta"][keep], r.eps[keep], sig["noise"][keep],
+                     draws, r.w[keep])
 
 
 def clean_response(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
                    effects: tuple[Effect, ...], truth: str | None = None) -> NDArray:
     """Noise-free y (N, 4) from rest with eta only (no habits) for a set of effects."""
-    plant = plant_of(spec, rig, effects, truth)
-    cl = closed_loop(plant, ctrl)
+    segs, plant = loops(spec, rig, ctrl, 0, eta.shape[0], effects, truth)
     z = np.zeros_like(eta)
     x0 = plant.state_at(-plant.sensor_delay_s)
-    y, _, _, _ = run(cl, np.hstack([eta, z, z]), cl.initial_state(x0))
-    return y
+    r = run_segments(segs, np.hstack([eta, z, z]), segs[0][1].initial_state(x0),
+                     i_max_a=plant.i_max_a)
+    return r.y
 
 
 def concealment(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
@@ -156,7 +207,13 @@ def concealment(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
 _WHERE = ("A", "B", "all")
 
 
-def _draw_effect(name: str, rng: np.random.Generator, noise: float) -> Effect:
+SEAL_NODES = ("D1", "D2", "mid")
+"""Where a seal is drawn: at a wheel (impeller-eye seal) or mid-span (nodes 15-26: a shaft
+or balance-piston seal between the bearings at nodes 8 and 33 of the reference rig)."""
+
+
+def _draw_effect(name: str, rng: np.random.Generator, noise: float,
+                 duration_s: float = 2.0, speed_rpm: float = 31500.0) -> Effect:
     """A first draw of one effect (scaled later by :func:`conceal`)."""
     u = rng.uniform
     if name == "actuator_lag":
@@ -184,6 +241,23 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float) -> Effect:
     elif name == "pedestal":
         p = {"bearing": "A", "mass_kg": u(40.0, 150.0), "natural_hz": u(150.0, 400.0),
              "zeta": u(0.02, 0.05)}
+    elif name == "current_limit":       # i_max_a is set by calibrate_current_limit
+        p = {"i_max_a": None, "recorded": str(rng.choice(["command", "coil"])),
+             "clipped_share_target": u(0.01, 0.05)}
+    elif name == "seal":
+        # gas seal: cross-coupled k, direct K of either sign, C from a whirl-frequency
+        # ratio k / (C Omega) of 0.3-0.8, a small cross-coupled damping
+        where = str(rng.choice(SEAL_NODES))
+        node = int(rng.integers(15, 27)) if where == "mid" else where
+        k = u(2e4, 1e5)
+        c = k / (u(0.3, 0.8) * speed_rpm * np.pi / 30.0)
+        p = {"node": node, "k_direct_nm": k * u(-1.0, 2.0), "k_cross_nm": k,
+             "c_direct_nsm": c, "c_cross_nsm": c * u(0.0, 0.2)}
+    elif name == "ks_drift":
+        # a total change of 2-6 % of ks over the record, either sign, centred mid-record
+        p = {"where": str(rng.choice(_WHERE)),
+             "rate_per_s": float(rng.choice([-1, 1]) * u(0.02, 0.06)) / duration_s,
+             "t_ref_s": duration_s / 2, "segment_s": 0.025}
     else:
         raise ValueError(f"unknown effect {name!r}")
     return Effect(name, {k: (float(v) if isinstance(v, np.floating) else v)
@@ -210,22 +284,43 @@ def _weaker(e: Effect, f: float = 0.7) -> Effect:
         p["amplitude_m"] *= f
     elif e.name == "pedestal":
         p["mass_kg"] /= f
+    elif e.name == "seal":
+        for k in ("k_direct_nm", "k_cross_nm", "c_direct_nsm", "c_cross_nsm"):
+            p[k] *= f
+    elif e.name == "ks_drift":
+        p["rate_per_s"] *= f
+    elif e.name == "current_limit":
+        raise ValueError("current_limit is not concealed: its strength is the clipped share")
     return Effect(e.name, p)
+
+
+KS_DRIFT_CAP = 0.06
+"""The largest total ks change over a record a ``ks_drift`` is strengthened to (-, of ks):
+a few per cent, as coil heating gives; its concealment may then stay below 0.2."""
+
+
+def _beyond_cap(e: Effect, duration_s: float) -> bool:
+    """An effect stronger than physics allows (only ks_drift has a cap)."""
+    return e.name == "ks_drift" and abs(e.params["rate_per_s"]) * duration_s > KS_DRIFT_CAP
 
 
 def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | None = None,
               duration_s: float = 2.0, dt: float = 1e-4, noise_rms_m: float = 5e-8,
               habits: bool = True) -> CaseSpec:
     """Draw a case of a kind (KINDS, or 'pair:<a>+<b>'): bearings off nominal, habits drawn,
-    effects drawn at a first guess (scaled to concealment in [0.2, 1) by :func:`conceal`)."""
+    effects drawn at a first guess (scaled to concealment in [0.2, 1) by :func:`conceal`;
+    a current limit's i_max by :func:`calibrate_current_limit`). 'control_force' is a
+    control with a process force at the discs (habits.draw_force, drawn last)."""
     k_theta = {a: float(rng.uniform(-0.3, 0.3)) for a in AXES}
     c_nsm = {a: float(rng.uniform(0.0, 300.0)) for a in AXES}
     hab = draw_habits(rng, noise_rms_m) if habits else Habits(noise_rms_m=noise_rms_m)
     truth, n_bending, effects = "reduced", 0, ()
     if kind == "control":
         pass
-    elif kind in IN_FAMILY:
-        effects = (_draw_effect(kind, rng, noise_rms_m),)
+    elif kind == "control_force":
+        hab = draw_force(hab, rng, load_rig().ki)
+    elif kind in IN_FAMILY or kind in HELD_OUT:
+        effects = (_draw_effect(kind, rng, noise_rms_m, duration_s),)
     elif kind == "pair" or kind.startswith("pair:"):
         names = (kind[5:].split("+") if ":" in kind
                  else list(rng.choice(IN_FAMILY, size=2, replace=False)))
@@ -252,8 +347,9 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
             ) -> tuple[CaseSpec, dict[str, float]]:
     """Bring each effect's concealment into ``band`` (default [0.2, 1)): weaken it by steps
     of 0.7 while it is >= band[1]; if its first draw is below band[0], strengthen it by
-    1/0.7 while the stronger version stays below band[1]. Returns the case and the
-    concealments per effect (index:name), of all effects together ('all') and of the
+    1/0.7 while the stronger version stays below band[1] (and, for a ks_drift, within
+    KS_DRIFT_CAP). A current limit is left alone (see calibrate_current_limit). Returns the
+    case and the concealments per effect (index:name), of all effects together ('all') and of the
     flexible modes of a full or bending truth ('flexible', never changed)."""
     n = round(spec.duration_s / spec.dt)
     eta = spec.habits.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
@@ -269,6 +365,8 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
         return c if np.isfinite(c) else np.inf
 
     for i, e in enumerate(effects):
+        if e.name == "current_limit":       # its strength is its clipped share instead
+            continue
         c = conc(e)
         for _ in range(max_tries):
             if c < band[1]:
@@ -277,6 +375,8 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
             c = conc(e)
         for _ in range(max_tries if c < band[0] else 0):
             stronger = _weaker(e, 1 / 0.7)
+            if _beyond_cap(stronger, spec.duration_s):
+                break
             c_s = conc(stronger)
             if c_s >= band[1]:
                 break
@@ -290,6 +390,41 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
         out["flexible"] = concealment(spec, ctrl, eta, rig, (), base=base)
     out["all"] = concealment(spec, ctrl, eta, rig, spec.effects, base=base)
     return spec, out
+
+
+def calibrate_current_limit(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator,
+                            rig: Rig, max_tries: int = 5, rel_tol: float = 0.15
+                            ) -> tuple[CaseSpec, dict[str, float]]:
+    """Set a current limit's i_max so that the record clips on about its
+    ``clipped_share_target`` of samples and channels: i_max starts at that quantile of |w|
+    in the linear run and is moved to the quantile of the clipped run's commanded |w|
+    (which clipping widens) until the share is within ``rel_tol`` of the target or after
+    ``max_tries`` runs. Every trial runs on the draws the record will have (a copy of rng
+    is used; rng itself is not advanced). Returns the case and {'i_max_a',
+    'clipped_share' (measured), 'y_change_over_noise' (rms of y with minus y without the
+    limit, same draws, over the noise rms)}."""
+    i = next(k for k, e in enumerate(spec.effects) if e.name == "current_limit")
+    target = spec.effects[i].params["clipped_share_target"]
+
+    def trial(i_max: float | None) -> tuple[CaseSpec, Simulated]:
+        effects = list(spec.effects)
+        effects[i] = Effect("current_limit", {**effects[i].params, "i_max_a": i_max})
+        sp = replace(spec, effects=tuple(effects))
+        copy = np.random.Generator(type(rng.bit_generator)())
+        copy.bit_generator.state = rng.bit_generator.state
+        return sp, simulate(sp, ctrl, copy, rig)
+
+    _, lin = trial(None)
+    i_max = float(np.quantile(np.abs(lin.w), 1.0 - target))
+    for _ in range(max_tries):
+        sp, sim = trial(i_max)
+        share = sim.draws["clipped_share"]
+        if abs(share - target) <= rel_tol * target:
+            break
+        i_max = float(np.quantile(np.abs(sim.w), 1.0 - target))
+    change = float(np.sqrt(np.mean((sim.y - lin.y) ** 2)) / spec.habits.noise_rms_m)
+    return sp, {"i_max_a": sp.effects[i].params["i_max_a"], "clipped_share": share,
+                "y_change_over_noise": change}
 
 
 def truth_record(spec: CaseSpec, rig: Rig, concealments: dict[str, float],
@@ -328,6 +463,12 @@ def write_case(spec: CaseSpec, out_dir: str | os.PathLike, name: str,
     if conceal_effects and (spec.effects or spec.truth == "full" or spec.n_bending
                             or spec.static_correction):
         spec, conc = conceal(spec, ctrl, rng, rig)
+    if any(e.name == "current_limit" for e in spec.effects):
+        spec, limit = calibrate_current_limit(spec, ctrl, rng, rig)
+        i = [e.name for e in spec.effects].index("current_limit")
+        conc[f"{i}:current_limit"] = limit["y_change_over_noise"]   # record-level, see README
+        if len(spec.effects) == 1:
+            conc["all"] = limit["y_change_over_noise"]
     sim = simulate(spec, ctrl, rng, rig)
     truth = truth_record(spec, rig, conc, sim.draws)
     return write_recording(Path(out_dir) / name, spec.dt, sim.y, sim.u, sim.eta,

@@ -35,6 +35,22 @@ Effect names and parameters (``Effect(name, params)``):
   (k_h = m (2 pi f_n)^2, c_h = 2 zeta m 2 pi f_n, per axis x and y). The AMB force
   f = ki i + ks (q_b - z) acts on the rotor (+f) and on the housing (-f); the probes of
   that bearing, mounted on the housing, measure q_s - z.
+- ``current_limit`` (held out, nonlinear): ``i_max_a`` (A), ``recorded`` ('command' or
+  'coil'), ``clipped_share_target``. The amplifiers deliver clip(w, -i_max, i_max): a
+  sample-level saturation, run by :func:`tests.foreign.loop.run_segments` (the plant here
+  only carries ``i_max_a``). The DAQ records the controller's command or the coil current
+  (see :mod:`tests.foreign.cases`).
+- ``seal`` (held out): ``node`` ('D1', 'D2' or a node number), ``k_direct_nm`` K (N/m),
+  ``k_cross_nm`` k (N/m), ``c_direct_nsm`` C (N s/m), ``c_cross_nsm`` c (N s/m). An
+  annular gas seal's reaction force at the node,
+  f_x = -K x - k y - C x' - c y',  f_y = +k x - K y + c x' - C y'
+  (k > 0 drives forward whirl, the sign of ``cross_coupling``; no added mass: a gas seal).
+- ``ks_drift`` (held out, time-varying): ``where`` ('A', 'B', 'all'), ``rate_per_s``
+  (1/s), ``t_ref_s`` (s), ``segment_s`` (s): the negative stiffness of those axes drifts,
+  ks_true(t) = (1 - theta - rate (t - t_ref)) ks, theta the case's k_<axis>, so theta is
+  the value at t_ref (mid-record: the record mean). Played as a staircase of
+  ``segment_s`` steps, each step's value that of its mid-point (see
+  :mod:`tests.foreign.cases`); the plant here is one step's.
 
 Flexible modes are not an effect here but the choice of truth (full, or reduced with
 bending pairs; see :mod:`tests.foreign.plant`).
@@ -42,6 +58,7 @@ bending pairs; see :mod:`tests.foreign.plant`).
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -63,10 +80,13 @@ EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
     "unbalance": ("planes",),
     "runout": ("channel", "amplitude_m", "phase_rad"),
     "pedestal": ("bearing", "mass_kg", "natural_hz", "zeta"),
+    "current_limit": ("i_max_a", "recorded", "clipped_share_target"),
+    "seal": ("node", "k_direct_nm", "k_cross_nm", "c_direct_nsm", "c_cross_nsm"),
+    "ks_drift": ("where", "rate_per_s", "t_ref_s", "segment_s"),
 }
 """Every effect the generator plays, with its parameter names (units in the module doc)."""
 
-HELD_OUT = ("pedestal",)
+HELD_OUT = ("pedestal", "current_limit", "seal", "ks_drift")
 """Effects the diagnosis library does not model (never tune the tool to them)."""
 
 
@@ -102,7 +122,8 @@ class ContinuousPlant:
     ``x0`` (n,) the state at time 0 (rotor at rest, oscillator at angle 0);
     ``delay_s`` the actuator-side plus sensor-side delay (s), ``sensor_delay_s`` the latter
     alone; ``n_rotor`` rotor states; ``omega`` the true spin (rad/s) and ``osc`` the index of
-    the oscillator's first state (-1 if none)."""
+    the oscillator's first state (-1 if none); ``F`` (n, 4) the map of external forces
+    [D1x, D1y, D2x, D2y] (N) into x'; ``i_max_a`` the amplifiers' current limit (A)."""
 
     A: NDArray
     B: NDArray
@@ -114,6 +135,8 @@ class ContinuousPlant:
     omega: float = 0.0
     osc: int = -1
     D: NDArray | None = None
+    F: NDArray | None = None
+    i_max_a: float = np.inf
 
     def state_at(self, t: float) -> NDArray:
         """x0 with the oscillator turned to time t (s; the rotor at rest): the state a
@@ -155,6 +178,15 @@ def build_plant(R: RotorBlock, rig: Rig, effects: tuple[Effect, ...] | list[Effe
         n = node_of(rig, e.params["where"])
         R = R.add_spring(dof(n, "x"), dof(n, "y"), e.params["kxy_nm"])
         R = R.add_spring(dof(n, "y"), dof(n, "x"), -e.params["kxy_nm"])
+    for e in eff.get("seal", []):
+        n, p = node_of(rig, e.params["node"]), e.params
+        jx, jy = dof(n, "x"), dof(n, "y")
+        for vel, direct, cross in ((False, p["k_direct_nm"], p["k_cross_nm"]),
+                                   (True, p["c_direct_nsm"], p["c_cross_nsm"])):
+            R = R.add_spring(jx, jx, direct, velocity=vel)     # f_x = -K x - k y
+            R = R.add_spring(jx, jy, cross, velocity=vel)
+            R = R.add_spring(jy, jx, -cross, velocity=vel)    # f_y = +k x - K y
+            R = R.add_spring(jy, jy, direct, velocity=vel)
     # actuator filters per channel: list of (a, b, c) SISO blocks in cascade
     act: list[list[tuple[NDArray, NDArray, NDArray]]] = [[] for _ in AXES]
     for e in eff.get("actuator_lag", []):
@@ -281,11 +313,16 @@ def build_plant(R: RotorBlock, rig: Rig, effects: tuple[Effect, ...] | list[Effe
             row, drow = np.zeros(n), np.zeros(4)
             row[s] = 1.0
         C[ch], D[ch] = gain_s[ch] * row, gain_s[ch] * drow
+    F = np.zeros((n, 4))
+    for i, (disc, axn) in enumerate(itertools.product(("D1", "D2"), "xy")):
+        F[S["rotor"], i] = R.force[:, dof(node_of(rig, disc), axn)]
+    i_max = min([e.params["i_max_a"] for e in eff.get("current_limit", [])
+                 if e.params["i_max_a"] is not None] or [np.inf])   # None: not yet drawn
     d_s = sum(e.params["delay_s"] for e in eff.get("sensor_delay", []))
     d_a = sum(e.params["delay_s"] for e in eff.get("actuator_delay", []))
     return ContinuousPlant(A=A, B=B, C=C, x0=x0, delay_s=float(d_a + d_s), n_rotor=R.n,
                            sensor_delay_s=float(d_s),
                            omega=float(speed_rpm_true) * np.pi / 30.0,
                            osc=S["osc"].start if lines else -1,
-                           D=D if np.any(D) else None)
+                           D=D if np.any(D) else None, F=F, i_max_a=float(i_max))
 

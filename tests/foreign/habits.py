@@ -13,17 +13,21 @@ All signals are sampled at the loop's dt over the whole simulation (burn-in incl
 - r1 (m, on the measurement) and r2 (A, at the plant input): white, unrecorded disturbances;
 - a burn-in (s) simulated with everything running before the record starts, so that the
   record begins mid-operation with non-zero plant and controller states;
-- the excitation eta: random binary +/-amplitude (A), independent per channel and sample.
+- the excitation eta: random binary +/-amplitude (A), independent per channel and sample;
+- a process force (N) at the discs (aerodynamic / process forcing; unrecorded, like r2):
+  Gaussian, band-limited by a 4th-order Butterworth band-pass to [f_lo, f_hi] Hz,
+  independent per forced axis, each scaled to the rms ``force_rms_n`` over the whole run.
+  Off unless drawn (:func:`draw_force`, the benchmark's ``control_force`` kind).
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter
+from scipy.signal import butter, lfilter, sosfilt
 
 
 @dataclass(frozen=True)
@@ -42,6 +46,9 @@ class Habits:
     r2_rms_a: float = 0.0
     burn_in_s: float = 0.0
     eta_amplitude_a: float = 0.3
+    force_rms_n: float = 0.0
+    force_band_hz: tuple[float, float] = (10.0, 300.0)
+    force_at: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -67,6 +74,27 @@ def draw_habits(rng: np.random.Generator, noise_rms_m: float = 5e-8) -> Habits:
         r2_rms_a=float(rng.uniform(0.0, 0.01)),
         burn_in_s=float(rng.uniform(0.2, 0.5)),
     )
+
+
+def draw_force(h: Habits, rng: np.random.Generator, ki: float) -> Habits:
+    """The habits with a process force drawn: at 'D1', 'D2' or both discs, band
+    [5-20, 150-300] Hz, rms per axis equivalent to 10-50 mA of bearing current
+    (force_rms_n = ki * I_eq, ki in N/A)."""
+    at = [("D1",), ("D2",), ("D1", "D2")][int(rng.integers(3))]
+    band = (float(rng.uniform(5.0, 20.0)), float(rng.uniform(150.0, 300.0)))
+    return replace(h, force_rms_n=float(ki * rng.uniform(0.01, 0.05)), force_band_hz=band,
+                   force_at=at)
+
+
+def band_force(n: int, dt: float, rms: float, band: tuple[float, float],
+               rng: np.random.Generator, n_axes: int) -> NDArray:
+    """Gaussian force (n, n_axes), band-pass [band] Hz (Butterworth, 4th order, run in
+    from 1 s before so it is stationary), each column scaled to rms ``rms``."""
+    lead = round(1.0 / dt)
+    v = rng.standard_normal((n + lead, n_axes))
+    sos = butter(4, band, btype="bandpass", fs=1.0 / dt, output="sos")
+    f = sosfilt(sos, v, axis=0)[lead:]
+    return rms * f / np.sqrt(np.mean(f**2, axis=0))
 
 
 def ar1_noise(n: int, rms: float, a: float, rng: np.random.Generator) -> NDArray:
@@ -95,9 +123,11 @@ def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator, t0: fl
     """Sampled habit signals over n samples, the first at time t0 (s; the record starts
     at t = 0, so a burn-in has t0 < 0; line phases and the drift refer to t = 0).
 
-    Returns ({'eta', 'w_add', 'm', 'noise'}, drawn): eta (A), w_add = r2 + amplifier offset
-    (A), m = everything added to the measurement (m; noise included), noise alone, and the
-    random draws worth keeping in the truth (line phases).
+    Returns ({'eta', 'w_add', 'm', 'noise', 'force'}, drawn): eta (A), w_add = r2 +
+    amplifier offset (A), m = everything added to the measurement (m; noise included), noise
+    alone, force (N, [D1x, D1y, D2x, D2y]; None without a process force, drawn last so the
+    other draws do not depend on it), and the random draws worth keeping in the truth (line
+    phases).
     """
     t = t0 + np.arange(n) * dt
     eta = h.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
@@ -118,4 +148,10 @@ def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator, t0: fl
     w_add = np.broadcast_to(np.asarray(h.amp_offset_a, dtype=float), (n, 4)).copy()
     if h.r2_rms_a:
         w_add += h.r2_rms_a * rng.standard_normal((n, 4))
-    return {"eta": eta, "w_add": w_add, "m": m, "noise": noise}, {"mains_phase_rad": phases}
+    force = None
+    if h.force_rms_n > 0 and h.force_at:
+        force = np.zeros((n, 4))
+        cols = [2 * ("D1", "D2").index(d) + i for d in h.force_at for i in (0, 1)]
+        force[:, cols] = band_force(n, dt, h.force_rms_n, h.force_band_hz, rng, len(cols))
+    return ({"eta": eta, "w_add": w_add, "m": m, "noise": noise, "force": force},
+            {"mains_phase_rad": phases})

@@ -19,6 +19,11 @@ the applied current is w[k-n-1] for the first f dt and w[k-n] for the rest, so e
 current in force just before the sampling instant, w[k-n-1]). With tau = 0 this is the plain
 ZOH. Plant, controller and a delay line of w form one discrete LTI system, built once and
 run by a plain recursion.
+
+The same system broken open at the amplifier input (w = Cw X + Dw e enters through Bw)
+runs an amplifier current limit, clip(w), sample by sample; a plant that varies slowly in
+time runs as a staircase of such systems (:func:`run_segments`); disc forces (N) enter
+through ``Bf``, held over each sample like the current.
 """
 
 from __future__ import annotations
@@ -92,7 +97,13 @@ def _gamma(A: NDArray, B: NDArray, s: float) -> tuple[NDArray, NDArray]:
 class ClosedLoop:
     """X[k+1] = Acl X[k] + Bcl e[k] with e = [eta (4); w_add (4); m (4)] (A, A, m);
     y_m = Cy X + Dy e, u = Cu X + Du e, eps = Ce X + De e.
-    X = [z (np); xk (nk); delay line w[k-1..k-n-1] (4 (n+1))]."""
+    X = [z (np); xk (nk); delay line w[k-1..k-n-1] (4 (n+1))].
+
+    The same loop broken open at the amplifier input, for a nonlinear amplifier:
+    w = Cw X + Dw e is the total commanded current (controller output, r2, offset; A) and
+    X[k+1] = Aop X[k] + Bop e[k] + Bw a(w[k]), a the amplifier map (a(w) = w gives
+    Acl = Aop + Bw Cw, Bcl = Bop + Bw Dw). ``Bf`` (nx, 4): the sampled disc forces
+    [D1x, D1y, D2x, D2y] (N, held over one sample of z) into X."""
 
     Acl: NDArray
     Bcl: NDArray
@@ -104,6 +115,12 @@ class ClosedLoop:
     De: NDArray
     n_plant: int
     n_ctrl: int
+    Aop: NDArray | None = None
+    Bop: NDArray | None = None
+    Bw: NDArray | None = None
+    Cw: NDArray | None = None
+    Dw: NDArray | None = None
+    Bf: NDArray | None = None
 
     def initial_state(self, plant_x0: NDArray) -> NDArray:
         X = np.zeros(self.Acl.shape[0])
@@ -144,24 +161,38 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     Dw = ctrl.Duy @ Dy
     Dw[:, :4] += ctrl.Due
     Dw[:, 4:8] += np.eye(4)
-    A = np.zeros((nx, nx))
-    Bm = np.zeros((nx, 12))
-    A[iz, iz] = Phi
-    # w[k-n] and w[k-n-1] in terms of X and e
-    for coef, lag in ((Gnew, n_shift), (Gold, n_shift + 1)):
-        if lag == 0:
-            A[iz, :] += coef @ Cw
-            Bm[iz, :] += coef @ Dw
-        else:
-            A[iz, line[lag - 1]] += coef
-    A[ik, :] += ctrl.By @ Cy
-    A[ik, ik] += ctrl.Ak
-    Bm[ik, :] += ctrl.By @ Dy
-    Bm[ik, :4] += ctrl.Be
-    A[line[0], :] = Cw
-    Bm[line[0], :] = Dw
-    for i in range(1, n_shift + 1):
-        A[line[i], line[i - 1]] = np.eye(4)
+
+    def assemble(Cw: NDArray, Dw: NDArray) -> tuple[NDArray, NDArray]:
+        """Acl, Bcl with the amplifier input w = Cw X + Dw e (zeros: the loop broken open)."""
+        A = np.zeros((nx, nx))
+        Bm = np.zeros((nx, 12))
+        A[iz, iz] = Phi
+        # w[k-n] and w[k-n-1] in terms of X and e
+        for coef, lag in ((Gnew, n_shift), (Gold, n_shift + 1)):
+            if lag == 0:
+                A[iz, :] += coef @ Cw
+                Bm[iz, :] += coef @ Dw
+            else:
+                A[iz, line[lag - 1]] += coef
+        A[ik, :] += ctrl.By @ Cy
+        A[ik, ik] += ctrl.Ak
+        Bm[ik, :] += ctrl.By @ Dy
+        Bm[ik, :4] += ctrl.Be
+        A[line[0], :] = Cw
+        Bm[line[0], :] = Dw
+        for i in range(1, n_shift + 1):
+            A[line[i], line[i - 1]] = np.eye(4)
+        return A, Bm
+
+    A, Bm = assemble(Cw, Dw)
+    Aop, Bop = assemble(np.zeros_like(Cw), np.zeros_like(Dw))
+    Bw = np.zeros((nx, 4))
+    Bw[line[0]] = np.eye(4)
+    if n_shift == 0:
+        Bw[iz] += Gnew
+    Bf = np.zeros((nx, 4))
+    if plant.F is not None:
+        Bf[iz] = _gamma(plant.A, plant.F, dt)[1]
     Cu = ctrl.Duy @ Cy
     Cu[:, ik] += ctrl.Cu
     Du = ctrl.Duy @ Dy
@@ -170,21 +201,73 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     Ce[:, ik] += ctrl.Ce
     De = ctrl.Dey @ Dy
     De[:, :4] += ctrl.Dee
-    return ClosedLoop(A, Bm, Cy, Dy, Cu, Du, Ce, De, np_, nk)
+    return ClosedLoop(A, Bm, Cy, Dy, Cu, Du, Ce, De, np_, nk, Aop, Bop, Bw, Cw, Dw, Bf)
 
 
-def run(cl: ClosedLoop, e: NDArray, X0: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+def run(cl: ClosedLoop, e: NDArray, X0: NDArray, force: NDArray | None = None
+        ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """Run the loop over inputs e (N, 12) from state X0; returns y_m, u, eps (N, 4) and the
-    final state. Outputs at step k use X[k] (the state before the update)."""
+    final state. Outputs at step k use X[k] (the state before the update). ``force``
+    (N, 4), N: disc forces [D1x, D1y, D2x, D2y] (an unrecorded disturbance)."""
+    r = run_segments([(0, cl)], e, X0, force=force)
+    return r.y, r.u, r.eps, r.X
+
+
+@dataclass(frozen=True)
+class LoopRun:
+    """A run of the loop: y_m, u (the controller's command), eps, w (the total commanded
+    current, A), coil (the current the amplifier delivers: w, or clip(w) with a current
+    limit; A), all (N, 4); X the final state."""
+
+    y: NDArray
+    u: NDArray
+    eps: NDArray
+    w: NDArray
+    coil: NDArray
+    X: NDArray
+
+
+def run_segments(segments: list[tuple[int, ClosedLoop]], e: NDArray, X0: NDArray,
+                 force: NDArray | None = None, i_max_a: float = np.inf) -> LoopRun:
+    """Run the loop over inputs e (N, 12) from X0, as a rig runs it.
+
+    ``segments``: (first sample, loop) pairs, first samples increasing from 0: a plant that
+    changes with time (slowly, piecewise constant) runs each loop from its first sample on.
+    ``i_max_a``: the amplifiers deliver clip(w, -i_max_a, i_max_a) (A) instead of w, a
+    sample-level nonlinearity run with the open-loop form of :class:`ClosedLoop`; with
+    i_max_a = inf the linear recursion X[k+1] = Acl X[k] + Bcl e[k] runs."""
     N = e.shape[0]
-    drive = e @ cl.Bcl.T
+    if segments[0][0] != 0:
+        raise ValueError(f"the first segment must start at sample 0, not {segments[0][0]}")
     Xs = np.empty((N, X0.size))
     X = X0.copy()
-    A = cl.Acl
-    for k in range(N):
-        Xs[k] = X
-        X = A @ X + drive[k]
+    bounds = [s for s, _ in segments[1:]] + [N]
+    clipped = np.isfinite(i_max_a)
+    for (k0, cl), k1 in zip(segments, bounds, strict=True):
+        if k1 <= k0:
+            continue
+        if not clipped:
+            drive = e[k0:k1] @ cl.Bcl.T
+            if force is not None:
+                drive = drive + force[k0:k1] @ cl.Bf.T
+            A = cl.Acl
+            for k in range(k0, k1):
+                Xs[k] = X
+                X = A @ X + drive[k - k0]
+        else:
+            drive = e[k0:k1] @ cl.Bop.T
+            if force is not None:
+                drive = drive + force[k0:k1] @ cl.Bf.T
+            wd = e[k0:k1] @ cl.Dw.T
+            A, Bw, Cw = cl.Aop, cl.Bw, cl.Cw
+            for k in range(k0, k1):
+                Xs[k] = X
+                w = Cw @ X + wd[k - k0]
+                X = A @ X + drive[k - k0] + Bw @ np.clip(w, -i_max_a, i_max_a)
+    cl = segments[0][1]     # output maps do not change with the plant's time variation
     y = Xs @ cl.Cy.T + e @ cl.Dy.T
     u = Xs @ cl.Cu.T + e @ cl.Du.T
     eps = Xs @ cl.Ce.T + e @ cl.De.T
-    return y, u, eps, X
+    w = Xs @ cl.Cw.T + e @ cl.Dw.T
+    coil = np.clip(w, -i_max_a, i_max_a) if clipped else w
+    return LoopRun(y, u, eps, w, coil, X)
