@@ -43,6 +43,7 @@ from bayes_amb.discrepancy.fitstats import (
     theta_summary,
 )
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal, own_noise_fit
+from bayes_amb.discrepancy.linearity import linearity_check
 from bayes_amb.discrepancy.locate import (
     LocateOptions,
     Location,
@@ -50,6 +51,7 @@ from bayes_amb.discrepancy.locate import (
     merge_spans,
     synchronous_speed,
 )
+from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.discrepancy.revisit import revisit
 from bayes_amb.discrepancy.select import Selection, SelectOptions, select
 from bayes_amb.discrepancy.story import plain_language
@@ -195,6 +197,10 @@ def _sample(fm: FittedModel, steps: int, seed: int) -> None:
     fm.samples = run.samples
 
 
+def _model_error_dict(fm: FittedModel) -> dict[str, Any] | None:
+    return None if fm.model_error is None else fm.model_error.to_dict()
+
+
 def _loop_poles(fwd: ForwardModel) -> np.ndarray:
     """Discrete poles of the nominal x -> eps system (S at theta = 0)."""
     A, _, _ = fwd.excitation_system(np.zeros((1, len(fwd.params))))
@@ -254,6 +260,9 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     if not np.isfinite(nominal.log_post):
         raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
                             "likelihood anywhere in the prior range")
+    say("checking that the loop is linear")
+    checks = replace(checks, checks=(*checks.checks, linearity_check(
+        recording, nominal.like, nominal.params, checks.u)))
     say("locating the mismatch")
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=opt.seed))
@@ -277,6 +286,9 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         for i, fm in enumerate({id(m): m for m in (nominal, sel.final)}.values()):
             say(f"sampling the posterior of model {i + 1}")
             _sample(fm, opt.steps, opt.seed + i)
+    say("integrating the model error out of the posteriors")
+    for fm in {id(m): m for m in (nominal, sel.final)}.values():
+        fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names)
     after = fit_quality(sel.final, eps)
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(sel.final, seed=opt.seed)
     effects = effect_summaries(sel.final, s_fin)
@@ -325,6 +337,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                 "log_likelihood_gain": float(sel.final.log_post - nominal.log_post)},
         "parameters_before": theta_summary(nominal, s_nom),
         "parameters_after": theta_summary(sel.final, s_fin),
+        "model_error": {"before": _model_error_dict(nominal),
+                        "after": _model_error_dict(sel.final)},
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "
                       "likelihood; prior odds 1/K for each of the K candidates of a round; "
                       f"accept above log posterior odds {opt.log_bf_threshold:g}"),

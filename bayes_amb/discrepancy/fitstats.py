@@ -44,18 +44,48 @@ def hdi(values: NDArray, prob: float = 0.9) -> list[float]:
 
 def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
     """Posterior draws of the parameters (n, p): emcee samples if present, else Laplace
-    draws clipped to the prior support (dimensions without covariance stay at the MAP)."""
-    if fitted.samples is not None:
-        return fitted.samples.reshape(-1, fitted.samples.shape[-1])[:, :fitted.p]
-    rng = np.random.default_rng(seed)
+    draws clipped to the prior support (dimensions without covariance stay at the MAP).
+
+    When the model's error has been assessed (``fitted.model_error``, model_error.py) the
+    draws are those of the posterior with the band-wise discrepancy integrated out: the
+    Laplace draws from its shifted mean and widened covariance; emcee draws moved by the
+    same shift and stretched about the MAP by the map taking one covariance to the other
+    (the open-faced sandwich adjustment of Shaby 2014), then clipped to the prior."""
+    me = fitted.model_error
     p = fitted.p
-    if fitted.cov is None:
-        return np.tile(fitted.params, (n, 1))
-    cov = fitted.cov[:p, :p]
-    d = rng.multivariate_normal(fitted.params, cov, size=n, method="eigh")
-    for j, (lo, hi) in enumerate(fitted.post.bounds()[:p]):
+    bounds = fitted.post.bounds()[:p]
+    if fitted.samples is not None:
+        d = fitted.samples.reshape(-1, fitted.samples.shape[-1])[:, :p].copy()
+        if me is not None and fitted.cov is not None:
+            d = _stretch(d, fitted.params, fitted.cov[:p, :p], me.cov[:p, :p]) + me.shift
+    else:
+        rng = np.random.default_rng(seed)
+        if fitted.cov is None:
+            return np.tile(fitted.params, (n, 1))
+        mean, cov = fitted.params, fitted.cov[:p, :p]
+        if me is not None:
+            mean, cov = mean + me.shift, me.cov[:p, :p]
+        d = rng.multivariate_normal(mean, cov, size=n, method="eigh")
+    for j, (lo, hi) in enumerate(bounds):
         d[:, j] = np.clip(d[:, j], -np.inf if lo is None else lo, np.inf if hi is None else hi)
     return d
+
+
+def _stretch(d: NDArray, centre: NDArray, cov: NDArray, cov_new: NDArray) -> NDArray:
+    """Draws d moved so that their spread about centre goes from cov to cov_new (free
+    dimensions only: those with positive variance in cov)."""
+    free = np.flatnonzero(np.diag(cov) > 0)
+    if free.size == 0:
+        return d
+    try:
+        K = np.linalg.cholesky(cov[np.ix_(free, free)])
+        Kw = np.linalg.cholesky(cov_new[np.ix_(free, free)])
+    except np.linalg.LinAlgError:
+        return d
+    out = d.copy()
+    dev = d[:, free] - centre[free]
+    out[:, free] = centre[free] + np.linalg.solve(K, dev.T).T @ Kw.T
+    return out
 
 
 def theta_summary(fitted: FittedModel, samples: NDArray,

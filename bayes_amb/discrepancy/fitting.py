@@ -20,6 +20,7 @@ from bayes_amb.discrepancy.candidates import Candidate
 from bayes_amb.discrepancy.gauss_newton import gauss_newton, least_squares_start
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
+from bayes_amb.discrepancy.model_error import ModelError
 from bayes_amb.inference.estimate import (
     LogPosterior,
     _initial_point,
@@ -49,6 +50,7 @@ class FittedModel:
     log_bf: float | None = None
     samples: NDArray | None = None      # emcee draws (walkers, draws, p + 3) when sampled
     log_odds: float | None = None       # log posterior odds when accepted (Multiplicity)
+    model_error: ModelError | None = None   # the band-wise model error, once assessed
 
     @property
     def names(self) -> tuple[str, ...]:
