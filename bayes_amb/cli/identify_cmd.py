@@ -80,6 +80,8 @@ def format_summary(s: dict) -> str:
                                               for k, v in noise.items()))
     for note in s.get("identifiability", {}).get("notes", []):
         lines.append(f"warning: {note}")
+    if "adequacy" in s:
+        lines.append(f"adequacy: {s['adequacy']['line']}")
     return "\n".join(lines)
 
 

@@ -27,6 +27,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_amb import __version__
+from bayes_amb.discrepancy.adequacy import judge, nominal_assessment
 from bayes_amb.discrepancy.balancing import balancing, check_planes
 from bayes_amb.discrepancy.candidates import (
     BEARING_COEFFICIENTS,
@@ -34,7 +35,7 @@ from bayes_amb.discrepancy.candidates import (
     all_candidates,
     left_out_coefficients,
 )
-from bayes_amb.discrepancy.checks import DataChecks, run_checks
+from bayes_amb.discrepancy.checks import DataChecks
 from bayes_amb.discrepancy.fitstats import (
     draws,
     effect_summaries,
@@ -42,8 +43,7 @@ from bayes_amb.discrepancy.fitstats import (
     residual_spectrum,
     theta_summary,
 )
-from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal, own_noise_fit
-from bayes_amb.discrepancy.linearity import linearity_check
+from bayes_amb.discrepancy.fitting import FittedModel, own_noise_fit
 from bayes_amb.discrepancy.locate import (
     LocateOptions,
     Location,
@@ -57,8 +57,6 @@ from bayes_amb.discrepancy.select import Selection, SelectOptions, select
 from bayes_amb.discrepancy.story import plain_language
 from bayes_amb.discrepancy.unexplained import unexplained_block
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference.forward import ForwardModel
-from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
 from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.io.atomic import json_text, write_netcdf_atomic, write_text_atomic
@@ -201,12 +199,6 @@ def _model_error_dict(fm: FittedModel) -> dict[str, Any] | None:
     return None if fm.model_error is None else fm.model_error.to_dict()
 
 
-def _loop_poles(fwd: ForwardModel) -> np.ndarray:
-    """Discrete poles of the nominal x -> eps system (S at theta = 0)."""
-    A, _, _ = fwd.excitation_system(np.zeros((1, len(fwd.params))))
-    return np.linalg.eigvals(A[0])
-
-
 def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
              unexplained: dict[str, Any]) -> str:
     if checks.failed:
@@ -251,18 +243,11 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         check_planes(recording.rig, opt.planes)
     names = parse_param_list(",".join(BEARING_COEFFICIENTS) if params is None else params)
     say = opt.progress or (lambda _: None)
-    fwd = ForwardModel(recording, names)
-    say("checking the data")
-    checks = run_checks(recording, _loop_poles(fwd))
-    eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
-    say("fitting the nominal model over the whole band")
-    nominal = fit_nominal(recording, names, eps, priors, seed=opt.seed, start=checks.start)
+    say("checking the data and fitting the nominal model over the whole band")
+    checks, nominal, eps = nominal_assessment(recording, names, priors, opt.seed)
     if not np.isfinite(nominal.log_post):
         raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
                             "likelihood anywhere in the prior range")
-    say("checking that the loop is linear")
-    checks = replace(checks, checks=(*checks.checks, linearity_check(
-        recording, nominal.like, nominal.params, checks.u)))
     say("locating the mismatch")
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=opt.seed))
@@ -327,6 +312,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                                      "compared (start-up transient of a record that does "
                                      "not start at rest, or of removed offsets)"},
         "verdict": _verdict(checks, loc, sel.accepted, unexplained),
+        "adequacy": judge(checks, loc).to_dict(),
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,

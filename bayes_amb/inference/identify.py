@@ -20,6 +20,7 @@ import numpy as np
 import xarray as xr
 
 from bayes_amb import __version__
+from bayes_amb.discrepancy.adequacy import assess
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.estimate import LogPosterior, MapResult, find_map, laplace_covariance
 from bayes_amb.inference.forward import ForwardModel
@@ -48,6 +49,8 @@ NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 throu
 class IdentifyOptions:
     """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only, map_method
     (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max),
+adequacy (run the diagnosis' data checks and location tests on the same model and report
+the verdict as summary['adequacy'], discrepancy/adequacy.py; about one nominal fit),
     noise_model ("loop": the coloured loop noise model; "iid": white Gaussian eps, the naive
     model, kept to show that it is overconfident), moves ("laplace": differential evolution
 mixed with independence proposals from the Laplace approximation at the MAP, the default;
@@ -62,6 +65,7 @@ mixed with independence proposals from the Laplace approximation at the MAP, the
     progress: Callable[[int, int, float], None] | None = None
     noise_model: str = "loop"
     moves: str = "laplace"
+    adequacy: bool = True
 
 
 @dataclass
@@ -158,6 +162,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         "n_bands": like.n_bands,
         "seed": opt.seed,
     }
+    if opt.adequacy:
+        summary["adequacy"] = assess(recording, names, priors, seed=opt.seed).to_dict()
     result = IdentificationResult(names=names, map=m, summary=summary, eps=eps, likelihood=like)
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"

@@ -1,0 +1,113 @@
+"""Is the model adequate for this recording? One line every estimate carries.
+
+An interval is honest only when its model is: an identification that never asks leaves
+an engineer with narrow intervals around a biased value. So ``identify`` runs the same
+tests ``diagnose`` starts with, on the same model (the named parameters free): the data
+checks (controller, start, offsets, excitation, linearity), the nominal fit over the whole
+band and the location tests on its residual (locate.py). The model is adequate when no
+data check fails and the mismatch tests find nothing; the line then says so, and
+otherwise what was found, where, and what to do.
+
+    a = assess(load_recording("run17.csv"), ("k_By", "c_By"))
+    a.adequate, a.line
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from bayes_amb.discrepancy.checks import DataChecks, run_checks
+from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
+from bayes_amb.discrepancy.linearity import linearity_check
+from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
+from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.offline import dual_youla_eps
+from bayes_amb.inference.priors import Prior
+from bayes_amb.io.recording import Recording
+
+
+@dataclass(frozen=True)
+class Adequacy:
+    """Whether the model is adequate for the recording, in one line, and where not.
+
+    channels and bands_hz: where the mismatch tests found structure the model leaves;
+    failed: the data checks that failed; suspected: a nonlinearity suspected (not proven)
+    by the clipping test (linearity.py)."""
+
+    adequate: bool
+    line: str
+    channels: list[str] = field(default_factory=list)
+    bands_hz: list[list[float]] = field(default_factory=list)
+    failed: list[str] = field(default_factory=list)
+    suspected: bool = False
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"adequate": self.adequate, "line": self.line, "channels": self.channels,
+                "bands_hz": self.bands_hz, "failed_checks": self.failed,
+                "nonlinearity_suspected": self.suspected}
+
+
+def loop_poles(fwd: ForwardModel) -> np.ndarray:
+    """Discrete poles of the nominal x -> eps system (S at theta = 0)."""
+    A, _, _ = fwd.excitation_system(np.zeros((1, len(fwd.params))))
+    return np.linalg.eigvals(A[0])
+
+
+def _spans(bands: list[list[float]], n: int = 3) -> str:
+    return ", ".join(f"{a:.0f}-{b:.0f} Hz" for a, b in bands[:n]) + \
+        (f" and {len(bands) - n} more" if len(bands) > n else "")
+
+
+def judge(checks: DataChecks, loc: Location) -> Adequacy:
+    """The adequacy verdict from the data checks and the location of a fitted model."""
+    lin = next((c for c in checks.checks if c.name == "linearity"), None)
+    suspected = bool(lin is not None and lin.values.get("clipping_suspected"))
+    note = (" A clipping amplifier is suspected (see the linearity check): keep the "
+            "currents below its limit." if suspected else "")
+    if checks.failed:
+        return Adequacy(False, "model NOT assessed: data check failed ("
+                        + ", ".join(checks.failed) + "); no interval can be trusted until "
+                        "the record is fixed (see the checks)." + note,
+                        failed=checks.failed, suspected=suspected)
+    if loc.detected:
+        return Adequacy(False, f"model NOT adequate: the residual keeps structure on "
+                        f"{','.join(loc.channels) or 'the record'} in "
+                        f"{_spans(loc.bands_hz) or 'the band'} "
+                        f"({loc.evidence.get('strength', 'detected')}); the intervals "
+                        "cannot cover what the model leaves out. Run `bayes-amb diagnose` "
+                        "to locate and name it, or excite the bands it sits in "
+                        "differently." + note,
+                        channels=list(loc.channels), bands_hz=list(loc.bands_hz),
+                        suspected=suspected)
+    return Adequacy(True, "model adequate: no data check failed and the location tests "
+                    "find nothing the model leaves in the residual." + note,
+                    suspected=suspected)
+
+
+def nominal_assessment(recording: Recording, names: tuple[str, ...],
+                       priors: dict[str, Prior] | None = None, seed: int = 0
+                       ) -> tuple[DataChecks, FittedModel, np.ndarray]:
+    """Data checks (with linearity), eps and the nominal fit: the start of a diagnosis."""
+    fwd = ForwardModel(recording, names)
+    checks = run_checks(recording, loop_poles(fwd))
+    eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
+    nominal = fit_nominal(recording, names, eps, priors, seed=seed, start=checks.start)
+    if np.isfinite(nominal.log_post):
+        checks = replace(checks, checks=(*checks.checks, linearity_check(
+            recording, nominal.like, nominal.params, checks.u)))
+    return checks, nominal, eps
+
+
+def assess(recording: Recording, names: tuple[str, ...],
+           priors: dict[str, Prior] | None = None, seed: int = 0) -> Adequacy:
+    """Adequacy of the model with the named parameters free for one recording."""
+    checks, nominal, _ = nominal_assessment(recording, names, priors, seed)
+    if not np.isfinite(nominal.log_post):
+        return Adequacy(False, "model NOT adequate: no parameter value in the prior gives a "
+                        "finite likelihood", failed=["fit"])
+    loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
+                 LocateOptions(seed=seed))
+    return judge(checks, loc)
