@@ -77,7 +77,10 @@ def test_effect_free_recording_raises_no_alarm(control):
     assert r["explanations"] == []
     assert r["verdict"] == "no mismatch" and not r["unexplained"]["present"]
     assert r["summary"].startswith("No mismatch")
-    assert [c["ok"] for c in r["checks"]] == [True] * 4
+    assert [(c["check"], c["ok"]) for c in r["checks"]] == [
+        ("excitation", True), ("controller", True), ("start", True), ("offsets", True),
+        ("linearity", True)]
+    assert r["adequacy"]["adequate"] and r["adequacy"]["line"].startswith("model adequate")
     assert r["record_window"]["at_rest"] and r["record_window"]["start_s"] == 0
     tried = {(c["effect"], c["location"]) for c in r["candidates"]}
     # the six coefficients left out of the fit are tried first, then every physics candidate

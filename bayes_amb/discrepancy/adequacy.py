@@ -61,10 +61,17 @@ def _spans(bands: list[list[float]], n: int = 3) -> str:
         (f" and {len(bands) - n} more" if len(bands) > n else "")
 
 
-def judge(checks: DataChecks, loc: Location) -> Adequacy:
-    """The adequacy verdict from the data checks and the location of a fitted model."""
+ROUNDING = 1e-6
+"""A residual below this share of eps (NRMSE on every channel) is rounding: its structure
+is the arithmetic's, not a mismatch (a noise-free simulation fitted exactly)."""
+
+
+def judge(checks: DataChecks, loc: Location, nrmse: float | None = None) -> Adequacy:
+    """The adequacy verdict from the data checks and the location of a fitted model;
+    nrmse: the largest NRMSE of its residual over the channels, when known."""
     lin = next((c for c in checks.checks if c.name == "linearity"), None)
-    suspected = bool(lin is not None and lin.values.get("clipping_suspected"))
+    exact = nrmse is not None and nrmse < ROUNDING
+    suspected = bool(lin is not None and lin.values.get("clipping_suspected")) and not exact
     note = (" A clipping amplifier is suspected (see the linearity check): keep the "
             "currents below its limit." if suspected else "")
     if checks.failed:
@@ -72,6 +79,9 @@ def judge(checks: DataChecks, loc: Location) -> Adequacy:
                         + ", ".join(checks.failed) + "); no interval can be trusted until "
                         "the record is fixed (see the checks)." + note,
                         failed=checks.failed, suspected=suspected)
+    if exact:
+        return Adequacy(True, f"model adequate: it reproduces the record to rounding level "
+                        f"(residual {nrmse:.1e} of eps on every channel).")
     if loc.detected:
         return Adequacy(False, f"model NOT adequate: the residual keeps structure on "
                         f"{','.join(loc.channels) or 'the record'} in "
@@ -104,10 +114,16 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
 def assess(recording: Recording, names: tuple[str, ...],
            priors: dict[str, Prior] | None = None, seed: int = 0) -> Adequacy:
     """Adequacy of the model with the named parameters free for one recording."""
-    checks, nominal, _ = nominal_assessment(recording, names, priors, seed)
+    checks, nominal, eps = nominal_assessment(recording, names, priors, seed)
     if not np.isfinite(nominal.log_post):
         return Adequacy(False, "model NOT adequate: no parameter value in the prior gives a "
                         "finite likelihood", failed=["fit"])
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=seed))
-    return judge(checks, loc)
+    return judge(checks, loc, worst_nrmse(nominal, eps))
+
+
+def worst_nrmse(fm: FittedModel, eps: np.ndarray) -> float:
+    """The largest NRMSE of a fitted model's residual over the channels."""
+    from bayes_amb.discrepancy.fitstats import fit_quality
+    return float(max(fit_quality(fm, eps)["nrmse"].values()))

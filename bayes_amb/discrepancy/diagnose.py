@@ -312,7 +312,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                                      "compared (start-up transient of a record that does "
                                      "not start at rest, or of removed offsets)"},
         "verdict": _verdict(checks, loc, sel.accepted, unexplained),
-        "adequacy": judge(checks, loc).to_dict(),
+        "adequacy": judge(checks, loc, max(before["nrmse"].values())).to_dict(),
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,
