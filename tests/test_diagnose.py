@@ -81,6 +81,8 @@ def test_effect_free_recording_raises_no_alarm(control):
         ("excitation", True), ("controller", True), ("start", True), ("offsets", True),
         ("linearity", True)]
     assert r["adequacy"]["adequate"] and r["adequacy"]["line"].startswith("model adequate")
+    # the model error never narrows a posterior
+    assert all(v >= 1 - 1e-9 for v in r["model_error"]["before"]["sd_ratio"].values())
     assert r["record_window"]["at_rest"] and r["record_window"]["start_s"] == 0
     tried = {(c["effect"], c["location"]) for c in r["candidates"]}
     # the six coefficients left out of the fit are tried first, then every physics candidate

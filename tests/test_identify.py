@@ -112,6 +112,9 @@ def test_paper_case_on_the_full_truth_has_a_small_bias(rig, observer_1ms, noise_
     res = identify(rec, "k_By", options=IdentifyOptions(map_only=True))
     bias = res.summary["map"]["k_By"] - 0.5
     assert 1e-5 < abs(bias) < max_bias      # present (the modes are left out), and small
+    if noise_rms == 0:                       # and the run says the model misses something
+        adq = res.summary["adequacy"]
+        assert not adq["adequate"] and adq["line"].startswith("model NOT adequate"), adq
 
 
 # ------------------------------------------------------- several parameters with noise
@@ -140,6 +143,9 @@ def test_several_parameters_recovered_with_noise(noisy3):
     assert covered >= len(TRUTH3) - 1, res.summary["parameters"]
     idf = res.summary["identifiability"]
     assert idf["identifiable"] and idf["notes"] == []
+    # a reduced-truth record with white noise: the model with these three free is adequate
+    adq = res.summary["adequacy"]
+    assert adq["adequate"] and adq["failed_checks"] == [], adq
 
 
 def test_summary_json_has_the_specified_keys(noisy3):

@@ -1,0 +1,71 @@
+"""Issue 27 pieces: the model-error scale, the linearity check and the adequacy line."""
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from bayes_amb.discrepancy.adequacy import judge
+from bayes_amb.discrepancy.checks import Check
+from bayes_amb.discrepancy.linearity import _partial_p, flat_tops
+from bayes_amb.discrepancy.model_error import _fit_tau
+
+
+@pytest.mark.parametrize("tau", [0.0, 0.05, 0.3])
+def test_model_error_scale_is_recovered(tau):
+    """Type-II ML of tau from estimates with known sampling precision: 40 bands of 32
+    coordinates; the sd of log tau-hat is about 1/sqrt(2 * 1280 * share of the variance
+    that is tau's), so +-30 % is > 5 sd where tau dominates; tau = 0 stays below the noise."""
+    rng = np.random.default_rng(5)
+    h = [rng.uniform(50.0, 5000.0, 32) for _ in range(40)]
+    z2 = [rng.normal(0.0, np.sqrt(tau**2 / 2 + 1 / hb)) ** 2 for hb in h]
+    est = _fit_tau(z2, h)
+    if tau == 0:
+        assert est < 0.02
+    else:
+        assert abs(est / tau - 1) < 0.3
+
+
+def test_flat_tops_find_a_clipped_current_and_not_a_noisy_one():
+    rng = np.random.default_rng(1)
+    y = rng.normal(0, 1e-6, (5000, 4))
+    u = rng.normal(0, 0.2, (5000, 4))
+    assert flat_tops(SimpleNamespace(u=u, y=y)) == []
+    u[:, 2] = np.clip(u[:, 2], -0.3, 0.3)           # 13 % of the samples beyond +-1.5 sd
+    found = flat_tops(SimpleNamespace(u=u, y=y))
+    assert len(found) == 1 and found[0].startswith("u_Bx")
+
+
+def test_partial_regression_finds_d_and_not_noise():
+    rng = np.random.default_rng(2)
+    n = 4000
+    D = rng.normal(size=(n, 4)) + 1j * rng.normal(size=(n, 4))
+    noise = rng.normal(size=(n, 4)) + 1j * rng.normal(size=(n, 4))
+    wide = np.array_split(np.arange(n), 8)
+    p_null = _partial_p(noise, D, wide, 1.0)
+    assert p_null.min() * p_null.size > 1e-3                     # Bonferroni: nothing
+    p_hit = _partial_p(noise + 0.3 * D[:, ::-1], D, wide, 1.0)
+    assert p_hit.max() < 1e-6
+
+
+def _checks(*failed):
+    cs = tuple(Check(n, n not in failed, n) for n in ("excitation", "controller", "linearity"))
+    return SimpleNamespace(checks=cs, failed=list(failed))
+
+
+def _loc(detected):
+    return SimpleNamespace(detected=detected, channels=["Ax"] if detected else [],
+                           bands_hz=[[120.0, 450.0]] if detected else [],
+                           evidence={"strength": "strong"})
+
+
+def test_adequacy_line_says_what_was_found():
+    a = judge(_checks(), _loc(False), 0.3)
+    assert a.adequate and a.line.startswith("model adequate")
+    a = judge(_checks(), _loc(True), 0.3)
+    assert not a.adequate and "120-450 Hz" in a.line and "diagnose" in a.line
+    assert a.channels == ["Ax"]
+    a = judge(_checks("linearity"), _loc(False), 0.3)
+    assert not a.adequate and a.failed == ["linearity"] and "NOT assessed" in a.line
+    a = judge(_checks(), _loc(True), 1e-9)                    # rounding, not a mismatch
+    assert a.adequate and "rounding" in a.line
