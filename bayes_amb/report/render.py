@@ -260,8 +260,9 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
     """Leads with the final model: after the diagnosis when it named physics (with the
     identification's nominal fit as "before"), else the identification."""
     s, truth = run.summary, run.true_theta()
-    bullets = []
     dg = run.diagnosis or {}
+    adequacy = (dg.get("adequacy") or s.get("adequacy") or {}).get("line")
+    bullets = [f"Adequacy of the model: {adequacy}"] if adequacy else []
     named = [str(e.get("description", e.get("effect", "?")))
              for e in dg.get("explanations") or []]
     after = dg.get("parameters_after") or {}
