@@ -247,3 +247,31 @@ def test_recording_without_excitation_is_refused(tmp_path, capsys):
         out, err = capsys.readouterr()
         assert (out, err) == ("", f"bayes-amb {argv[0]}: error: {expected}\n")
     assert not (tmp_path / "run").exists() and not (tmp_path / "diag").exists()
+
+
+def _all_parsers(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()
+                 ) -> list[tuple[tuple[str, ...], argparse.ArgumentParser]]:
+    """The top-level parser and every (nested) subparser, with the argv that reaches it."""
+    out = [(path, parser)]
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for name, p in a.choices.items():
+                out += _all_parsers(p, path + (name,))
+    return out
+
+
+def test_every_parser_formats_its_help():
+    """Help text is %-formatted by argparse: a bare '%' in any help string (top-level
+    command list included) crashed `bayes-amb --help` with a TypeError."""
+    parsers = _all_parsers(build_parser())
+    assert len(parsers) > 10 and parsers[0][0] == ()
+    for path, p in parsers:
+        text = p.format_help()
+        assert text.startswith("usage:"), path
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["answers", "--help"], ["rig", "--help"]])
+def test_help_exits_zero(argv, capsys):
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("usage: bayes-amb") and err == ""

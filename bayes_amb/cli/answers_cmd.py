@@ -13,7 +13,7 @@ from bayes_amb.errors import BayesAmbError
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "answers", help="bearing ks and c, closed-loop modes, log decrements, API 617 "
-        "margins, ISO 14839-3 peak sensitivity, with 90 % intervals",
+        "margins, ISO 14839-3 peak sensitivity, with 90%% intervals",
         description="Propagate the posterior of an identification run (RUN_DIR; after the "
         "diagnosis when RUN_DIR holds one that named physics) through the full FE plant "
         "closed with the recorded controller.")
