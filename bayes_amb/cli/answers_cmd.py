@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 import json
 
-from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.cli.common import add_rig_option, check_rig_option, emit, to_jsonable
 from bayes_amb.errors import BayesAmbError
 
 
@@ -21,6 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "posterior.nc)")
     p.add_argument("--recording", default=None, help="the recording (default: the one "
                    "named in summary.json)")
+    add_rig_option(p)
     p.add_argument("--draws", type=int, default=60, help="posterior draws used (default 60)")
     p.add_argument("--speeds", default=None, metavar="RPM,RPM,...", help="speeds of the "
                    "mode table (default 0.8, 0.9, 1.0, 1.05 x the recording's speed)")
@@ -52,6 +53,7 @@ def run(args: argparse.Namespace) -> int:
     if args.draws < 1:
         raise BayesAmbError(f"option --draws: expected a positive integer, got {args.draws}")
     run_data = collect_run(args.run_dir, recording=args.recording)
+    check_rig_option(args, run_data.recording)
     if run_data.recording is None:
         raise BayesAmbError(f"run folder {args.run_dir}: field recording: "
                             f"{run_data.recording_note}")

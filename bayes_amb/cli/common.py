@@ -58,3 +58,24 @@ def read_priors(args: Any) -> dict[str, Any]:
         name, pr = parse_prior_assignment(text)
         priors[name] = pr
     return priors
+
+
+def add_rig_option(p: Any) -> None:
+    """--rig FILE on a command that builds its model from a recording."""
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig file (or shipped rig name) the recording should be from; the "
+                   "model is always built from the rig embedded in the recording, and a "
+                   "--rig that differs from it is refused with the first differing field "
+                   "(default: no check)")
+
+
+def check_rig_option(args: Any, recording: Any) -> None:
+    """Refuse (one line, exit 2) a --rig that is not the recording's embedded rig."""
+    if getattr(args, "rig", None) is None:
+        return
+    from bayes_amb.errors import RigError
+    from bayes_amb.rig import check_rig_matches
+
+    if recording is None:
+        raise RigError(f"option --rig: no recording to check rig file {args.rig} against")
+    check_rig_matches(args.rig, recording.rig, f"recording {recording.source}")
