@@ -257,7 +257,7 @@ def _all_parsers(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()
     for a in parser._actions:
         if isinstance(a, argparse._SubParsersAction):
             for name, p in a.choices.items():
-                out += _all_parsers(p, path + (name,))
+                out += _all_parsers(p, (*path, name))
     return out
 
 

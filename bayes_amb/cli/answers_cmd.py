@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import argparse
-import json
 
 from bayes_amb.cli.common import add_rig_option, check_rig_option, emit, to_jsonable
 from bayes_amb.errors import BayesAmbError
@@ -48,6 +47,7 @@ def run(args: argparse.Namespace) -> int:
     from bayes_amb.engineering import physical_quantities
     from bayes_amb.engineering.quantities import INTERVAL_TEXT
     from bayes_amb.io.atomic import write_text_atomic
+    from bayes_amb.io.nonfinite import result_json_text
     from bayes_amb.report.collect import collect_run
 
     if args.draws < 1:
@@ -65,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     data = res.to_dict()
     data["source"] = source
     if args.out:
-        write_text_atomic(args.out, json.dumps(to_jsonable(data), indent=2) + "\n")
+        write_text_atomic(args.out, result_json_text(to_jsonable(data)))
     lines = [f"{k:<52} {q.value:>12.5g}  [{q.lo:.5g}, {q.hi:.5g}]  {q.unit}"
              + ("" if q.estimated else "  (not estimated)")
              for k, q in res.quantities.items()]

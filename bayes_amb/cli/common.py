@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from typing import Any
 
@@ -32,8 +31,10 @@ def to_jsonable(obj: Any) -> Any:
 
 def emit(data: dict[str, Any], text: str, as_json: bool) -> None:
     """Print machine-readable JSON or the human-readable text."""
-    if as_json:
-        sys.stdout.write(json.dumps(to_jsonable(data), indent=2) + "\n")
+    if as_json:                  # non-finite numbers as null, listed (io/nonfinite.py)
+        from bayes_amb.io.nonfinite import result_json_text
+
+        sys.stdout.write(result_json_text(to_jsonable(data)))
     else:
         sys.stdout.write(text.rstrip() + "\n")
 
