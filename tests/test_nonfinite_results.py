@@ -5,7 +5,8 @@ A diagnosis of a full-order record with a 45 us control delay crashed at the end
 identification summary and diagnosis report get nan, +inf or -inf injected at random
 float leaves (fixed seed, 60 cases each); every writer (summary.json, diagnosis.json,
 --json output) and the command texts must run, as must the report (collected back from the
-files, sections with figures and HTML; every 6th case), the files must be strict JSON, and the values must come back.
+files, sections with figures and HTML; every 6th case); the files must be strict JSON and
+the values must come back.
 """
 
 from __future__ import annotations

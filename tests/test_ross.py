@@ -79,9 +79,8 @@ def test_shaft_damping_beta_is_carried(tmp_path, capsys):
     beta = 1e-6                                       # s; zeta about 0.007
     rotor = _rotor(beta=beta)
     rotor.save(tmp_path / "rotor.toml")
-    code, out, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"),
-                              "--speed-rpm", "24000", "-o", str(tmp_path / "rig.toml")],
-                             capsys)
+    code, _, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"),
+                            "--speed-rpm", "24000", "-o", str(tmp_path / "rig.toml")], capsys)
     assert code == 0, err
     rig = load_rig(tmp_path / "rig.toml")
     M, K, _ = shaft_matrices(rig)
