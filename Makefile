@@ -1,5 +1,6 @@
 # bayes_amb: everything a fresh clone needs, from nothing.
-#   make demo   - create .venv (Python >= 3.12), install, run the end-to-end demo
+#   make demo   - create .venv (Python >= 3.12), install, compile the numba kernels once
+#                 (python -m bayes_amb.warmup), run the end-to-end demo
 #   make test   - same set-up, then the default test suite
 #   make bench  - the benchmarks (ratios against a baseline run side by side)
 # BLAS threads: the tool limits them itself (bayes_amb/threads.py; BAYES_AMB_THREADS=N).
@@ -21,6 +22,7 @@ $(STAMP): pyproject.toml tools/find-python.sh
 	fi
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test]'
+	$(PY) -m bayes_amb.warmup
 	@touch $(STAMP)
 
 demo: $(STAMP)

@@ -65,19 +65,20 @@ COMMANDS = {
                  ["--amplitude", "--r1-rms", "--r2-rms", "--r1-band-hz", "--r2-band-hz",
                   "--noise-rms", "--duration", "--dt", "--speed-rpm", "--seed", "--band",
                   "--set", "--effect", "--truth", "--excitation", "--rig", "--controller",
-                  "-o"]),
+                  "--port", "-o"]),
     "identify": (["identify", "{miss}/rec.csv", "--params", "k_By", "--out", "{tmp}/run"],
                  ["--walkers", "--steps", "--seed", "--map-method", "--params", "--prior",
-                  "--prior-file", "--out"]),
+                  "--prior-file", "--out", "--rig"]),
     "diagnose": (["diagnose", "{miss}/rec.csv", "--out", "{tmp}/diag"],
                  ["--threshold", "--max-effects", "--steps", "--seed", "--effects", "--scan",
-                  "--planes", "--params", "--prior", "--prior-file"]),
+                  "--planes", "--params", "--prior", "--prior-file", "--rig"]),
     "study": (["study", "{miss}/s.toml", "--out", "{tmp}/study"],
               ["--workers", "--dask-local", "--scheduler", "--out"]),
     "controller": (["controller", "--rig", "{miss}/rig.toml"],
                    ["--dt", "--speed-rpm", "--export", "--rig"]),
     "model": (["model", "--rig", "{miss}/rig.toml"], ["--speed-rpm", "--rig"]),
-    "report": (["report", "{miss}/run"], ["--pdf-backend", "--out", "--study", "--recording"]),
+    "report": (["report", "{miss}/run"], ["--pdf-backend", "--out", "--study", "--recording",
+                                         "--rig"]),
     "params": (["params"], ["--rig"]),
 }
 
@@ -247,3 +248,58 @@ def test_recording_without_excitation_is_refused(tmp_path, capsys):
         out, err = capsys.readouterr()
         assert (out, err) == ("", f"bayes-amb {argv[0]}: error: {expected}\n")
     assert not (tmp_path / "run").exists() and not (tmp_path / "diag").exists()
+
+
+def _all_parsers(parser: argparse.ArgumentParser, path: tuple[str, ...] = ()
+                 ) -> list[tuple[tuple[str, ...], argparse.ArgumentParser]]:
+    """The top-level parser and every (nested) subparser, with the argv that reaches it."""
+    out = [(path, parser)]
+    for a in parser._actions:
+        if isinstance(a, argparse._SubParsersAction):
+            for name, p in a.choices.items():
+                out += _all_parsers(p, (*path, name))
+    return out
+
+
+def test_every_parser_formats_its_help():
+    """Help text is %-formatted by argparse: a bare '%' in any help string (top-level
+    command list included) crashed `bayes-amb --help` with a TypeError."""
+    parsers = _all_parsers(build_parser())
+    assert len(parsers) > 10 and parsers[0][0] == ()
+    for path, p in parsers:
+        text = p.format_help()
+        assert text.startswith("usage:"), path
+
+
+@pytest.mark.parametrize("argv", [["--help"], ["answers", "--help"], ["rig", "--help"]])
+def test_help_exits_zero(argv, capsys):
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert out.startswith("usage: bayes-amb") and err == ""
+
+
+# --- --rig on the commands that build a model from a recording ------------------------------
+
+def test_rig_option_is_checked_against_the_recording(tmp_path, capsys):
+    """The model comes from the rig embedded in the recording; --rig is a check: the same
+    rig passes, another is refused in one line naming both, exit 2, nothing written."""
+    rec = str(tmp_path / "r.csv")
+    assert main(["simulate", "--truth", "reduced", "--dt", "1e-3", "--duration", "0.2",
+                 "--set", "k_By=0.3", "-o", rec]) == 0
+    capsys.readouterr()
+    for argv in (["identify", rec, "--params", "k_By", "--map-only", "--out",
+                  str(tmp_path / "id")],
+                 ["diagnose", rec, "--params", "k_By", "--out", str(tmp_path / "dg")]):
+        assert main([*argv, "--rig", "small_rotor"]) == 2
+        out, err = capsys.readouterr()
+        assert out == "" and err.count("\n") == 1, err
+        assert ("option --rig: rig file small_rotor is not the rig embedded in recording "
+                in err and "'small_rotor' against 'reference'" in err
+                and "first difference shaft." in err), err
+        assert not (tmp_path / argv[-1]).exists()
+    assert main(["identify", rec, "--params", "k_By", "--map-only", "--out",
+                 str(tmp_path / "id"), "--rig", "reference", "--json"]) == 0
+    assert (tmp_path / "id" / "summary.json").is_file()
+    capsys.readouterr()
+    assert main(["answers", str(tmp_path / "id"), "--rig", "small_rotor"]) == 2
+    assert "option --rig" in capsys.readouterr().err

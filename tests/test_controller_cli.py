@@ -60,6 +60,19 @@ def test_text_output(capsys):
     assert main(["controller", "--dt", "1e-3"]) == 0
     out = capsys.readouterr().out
     assert "ISO 14839-3 zone" in out and "Bezout" in out
+    assert "320-state plant of rig 'reference'" in out
+
+
+def test_state_count_and_rig_name_are_computed(capsys):
+    """The caption names the rig's own state count, not the reference rig's 320."""
+    from bayes_amb.rig import load_rig
+    from bayes_amb.rotor import full_model
+
+    n = full_model(load_rig("small_rotor")).n_states
+    assert n != 320
+    assert main(["controller", "--rig", "small_rotor", "--dt", "1e-4"]) == 0
+    out = capsys.readouterr().out
+    assert f"{n}-state plant of rig 'small_rotor'" in out and "320" not in out
 
 
 @pytest.mark.parametrize("args, needle", [

@@ -25,10 +25,11 @@ with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(io.St
 KP = 8000.0   # a proportional bearing law i = -KP y (A/m), the same on both sides
 
 
-def _rotor(odl=(0.06,) * 35, sensor_nodes=(4, 28)):
+def _rotor(odl=(0.06,) * 35, sensor_nodes=(4, 28), beta=0.0, **shaft_kw):
     steel = rs.Material(name="steel_bayes_amb_test", rho=7850.0, E=205e9, Poisson=0.29)
-    shaft = [rs.ShaftElement(L=0.01, idl=0.0, odl=d, material=steel, shear_effects=False,
-                             rotary_inertia=True, gyroscopic=True) for d in odl]
+    kw = {"shear_effects": False, "rotary_inertia": True, "gyroscopic": True, **shaft_kw}
+    shaft = [rs.ShaftElement(L=0.01, idl=0.0, odl=d, material=steel, beta=beta, **kw)
+             for d in odl]
     discs = [rs.DiskElement(n=0, m=3.2, Id=0.0035, Ip=0.0020),
              rs.DiskElement(n=35, m=1.1, Id=0.0008, Ip=0.0012)]
     amb = [rs.MagneticBearingElement(n=n, g0=6e-4, i0=2.0, ag=1e-4, nw=431, kp_pid=KP,
@@ -66,3 +67,47 @@ def test_what_a_rig_cannot_hold_is_one_line(tmp_path, capsys):
     code, _, err = run_cli(["rig", "from-ross", str(tmp_path / "none.toml"), "-o",
                             str(tmp_path / "rig.toml")], capsys)
     assert code == 2 and err.count("\n") == 1 and "none.toml: field <file>: not found" in err
+
+
+def test_shaft_damping_beta_is_carried(tmp_path, capsys):
+    """ROSS's stiffness-proportional shaft damping (beta) becomes first_mode_zeta = beta w1/2
+    and gives the same damped eigenvalues (real parts too); before, it was dropped for a
+    default zeta of 0.005."""
+    from bayes_amb.rig.ross import rig_from_ross
+    from bayes_amb.rotor.assembly import first_free_free_bending, shaft_matrices
+
+    beta = 1e-6                                       # s; zeta about 0.007
+    rotor = _rotor(beta=beta)
+    rotor.save(tmp_path / "rotor.toml")
+    code, _, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"),
+                            "--speed-rpm", "24000", "-o", str(tmp_path / "rig.toml")], capsys)
+    assert code == 0, err
+    rig = load_rig(tmp_path / "rig.toml")
+    M, K, _ = shaft_matrices(rig)
+    assert rig.first_mode_zeta == pytest.approx(0.5 * beta * first_free_free_bending(M, K),
+                                                rel=1e-12)
+    assert 0.003 < rig.first_mode_zeta < 0.02
+    fm = full_model(rig, 0.0)
+    ours = np.linalg.eigvals(fm.A - KP * fm.B @ fm.C)
+    ours = ours[ours.imag > 1.0]
+    ours = ours[np.argsort(ours.imag)][:12]
+    theirs = np.asarray(rotor.run_modal(speed=0.0, num_modes=60).evalues)
+    for v in ours:                       # damped: real parts agree as well as frequencies
+        assert np.min(np.abs(theirs - v)) / abs(v) < 1e-6, v
+    assert np.min(ours.real) < -1.0     # and there is damping to compare
+    # an explicit --zeta replaces it, and says so
+    conv = rig_from_ross(rotor, nominal_speed_rpm=1.0, first_mode_zeta=0.01)
+    assert conv.rig.first_mode_zeta == 0.01
+    assert any("replaces the ROSS shaft's damping (beta 1e-06 s" in n for n in conv.notes)
+
+
+@pytest.mark.parametrize("kw, match", [
+    ({"alpha": 0.5}, r"shaft element 0: mass-proportional damping alpha 0\.5 has no rig "),
+    ({"rotary_inertia": False}, r"shaft element 0: rotary_inertia=False; a rig always"),
+    ({"axial_force": 100.0}, r"shaft element 0: axial force 100\.0 has no rig equivalent"),
+])
+def test_what_ross_holds_and_a_rig_cannot_is_refused(kw, match):
+    from bayes_amb.rig.ross import rig_from_ross
+
+    with pytest.raises(RigError, match=match):
+        rig_from_ross(_rotor(**kw), nominal_speed_rpm=1.0)

@@ -4,16 +4,15 @@
 from __future__ import annotations
 
 import argparse
-import json
 
-from bayes_amb.cli.common import emit, to_jsonable
+from bayes_amb.cli.common import add_rig_option, check_rig_option, emit, to_jsonable
 from bayes_amb.errors import BayesAmbError
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         "answers", help="bearing ks and c, closed-loop modes, log decrements, API 617 "
-        "margins, ISO 14839-3 peak sensitivity, with 90 % intervals",
+        "margins, ISO 14839-3 peak sensitivity, with 90%% intervals",
         description="Propagate the posterior of an identification run (RUN_DIR; after the "
         "diagnosis when RUN_DIR holds one that named physics) through the full FE plant "
         "closed with the recorded controller.")
@@ -21,6 +20,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "posterior.nc)")
     p.add_argument("--recording", default=None, help="the recording (default: the one "
                    "named in summary.json)")
+    add_rig_option(p)
     p.add_argument("--draws", type=int, default=60, help="posterior draws used (default 60)")
     p.add_argument("--speeds", default=None, metavar="RPM,RPM,...", help="speeds of the "
                    "mode table (default 0.8, 0.9, 1.0, 1.05 x the recording's speed)")
@@ -47,11 +47,13 @@ def run(args: argparse.Namespace) -> int:
     from bayes_amb.engineering import physical_quantities
     from bayes_amb.engineering.quantities import INTERVAL_TEXT
     from bayes_amb.io.atomic import write_text_atomic
+    from bayes_amb.io.nonfinite import result_json_text
     from bayes_amb.report.collect import collect_run
 
     if args.draws < 1:
         raise BayesAmbError(f"option --draws: expected a positive integer, got {args.draws}")
     run_data = collect_run(args.run_dir, recording=args.recording)
+    check_rig_option(args, run_data.recording)
     if run_data.recording is None:
         raise BayesAmbError(f"run folder {args.run_dir}: field recording: "
                             f"{run_data.recording_note}")
@@ -63,7 +65,7 @@ def run(args: argparse.Namespace) -> int:
     data = res.to_dict()
     data["source"] = source
     if args.out:
-        write_text_atomic(args.out, json.dumps(to_jsonable(data), indent=2) + "\n")
+        write_text_atomic(args.out, result_json_text(to_jsonable(data)))
     lines = [f"{k:<52} {q.value:>12.5g}  [{q.lo:.5g}, {q.hi:.5g}]  {q.unit}"
              + ("" if q.estimated else "  (not estimated)")
              for k, q in res.quantities.items()]

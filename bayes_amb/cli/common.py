@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import sys
 from typing import Any
 
@@ -32,8 +31,10 @@ def to_jsonable(obj: Any) -> Any:
 
 def emit(data: dict[str, Any], text: str, as_json: bool) -> None:
     """Print machine-readable JSON or the human-readable text."""
-    if as_json:
-        sys.stdout.write(json.dumps(to_jsonable(data), indent=2) + "\n")
+    if as_json:                  # non-finite numbers as null, listed (io/nonfinite.py)
+        from bayes_amb.io.nonfinite import result_json_text
+
+        sys.stdout.write(result_json_text(to_jsonable(data)))
     else:
         sys.stdout.write(text.rstrip() + "\n")
 
@@ -58,3 +59,24 @@ def read_priors(args: Any) -> dict[str, Any]:
         name, pr = parse_prior_assignment(text)
         priors[name] = pr
     return priors
+
+
+def add_rig_option(p: Any) -> None:
+    """--rig FILE on a command that builds its model from a recording."""
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig file (or shipped rig name) the recording should be from; the "
+                   "model is always built from the rig embedded in the recording, and a "
+                   "--rig that differs from it is refused with the first differing field "
+                   "(default: no check)")
+
+
+def check_rig_option(args: Any, recording: Any) -> None:
+    """Refuse (one line, exit 2) a --rig that is not the recording's embedded rig."""
+    if getattr(args, "rig", None) is None:
+        return
+    from bayes_amb.errors import RigError
+    from bayes_amb.rig import check_rig_matches
+
+    if recording is None:
+        raise RigError(f"option --rig: no recording to check rig file {args.rig} against")
+    check_rig_matches(args.rig, recording.rig, f"recording {recording.source}")

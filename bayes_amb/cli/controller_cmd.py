@@ -63,6 +63,7 @@ def controller_report(rig_path: str | None = None, dt: float = 1e-4,
                    **{k: getattr(ctrl.settings, k) for k in ("y_ref", "u_ref", "w_ref", "v_ref")}},
         "closed_loop_stable_full": bool(rho_full < 1.0),
         "spectral_radius_full": rho_full,
+        "full_states": int(fm.A.shape[0]),
         "bezout_residual": bezout_residual(coprime_factors(ctrl)),
         "s_theta_stable": bool(max(s_radii) < 1.0),
         "s_theta_grid": {"params": list(TESTED_PARAMS), "theta": list(TESTED_THETA),
@@ -83,7 +84,8 @@ def format_report(d: dict) -> str:
         f"{d['speed_rpm']:.0f} rpm",
         f"  design          : {d['design']['method']}",
         f"  full plant loop : {'stable' if d['closed_loop_stable_full'] else 'UNSTABLE'} "
-        f"(spectral radius {d['spectral_radius_full']:.6f}, 320-state plant)",
+        f"(spectral radius {d['spectral_radius_full']:.6f}, {d['full_states']}-state plant of "
+        f"rig '{d['rig']}')",
         f"  sensitivity     : {peaks}  -> ISO 14839-3 zone {d['iso14839_zone']}",
         f"  Bezout residual : {d['bezout_residual']:.2e} (eq. 3, relative)",
         f"  S(theta) stable : {d['s_theta_stable']} over |theta| <= 0.5 on each k_*, c_* "

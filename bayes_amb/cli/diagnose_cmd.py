@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
+from bayes_amb.cli.common import (
+    add_prior_options,
+    add_rig_option,
+    check_rig_option,
+    emit,
+    read_priors,
+    to_jsonable,
+)
 from bayes_amb.cli.options import integer, real, seed
 from bayes_amb.discrepancy import (
     VOCABULARY,
@@ -30,6 +37,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "the fit before and after. Writes DIR/diagnosis.json, "
                        "DIR/residuals.nc and DIR/models/*.nc.")
     p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
+    add_rig_option(p)
     p.add_argument("--params", default=None, metavar="NAMES",
                    help="stiffness/damping parameters kept in every model, comma-separated "
                         "(default: all eight bearing coefficients k_Ax,k_Ay,k_Bx,k_By,c_Ax,"
@@ -131,6 +139,7 @@ def run(args: argparse.Namespace) -> int:
         raise BayesAmbError(f"option --scan: effect {bad[0]!r} has no node scan; known: "
                             + ", ".join(scanned_effects()))
     rec = load_recording(args.recording)
+    check_rig_option(args, rec)
     planes = None
     if args.planes is not None:
         planes = tuple(p.strip() for p in args.planes.split(","))

@@ -5,7 +5,14 @@ from __future__ import annotations
 import argparse
 import sys
 
-from bayes_amb.cli.common import add_prior_options, emit, read_priors, to_jsonable
+from bayes_amb.cli.common import (
+    add_prior_options,
+    add_rig_option,
+    check_rig_option,
+    emit,
+    read_priors,
+    to_jsonable,
+)
 from bayes_amb.cli.options import integer, seed
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.io.recording import load_recording
@@ -17,6 +24,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "emcee posterior run to 50 autocorrelation times. Writes "
                        "RUN_DIR/posterior.nc and RUN_DIR/summary.json.")
     p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
+    add_rig_option(p)
     p.add_argument("--params", required=True, metavar="NAMES",
                    help="comma-separated parameter names, e.g. k_By,c_By (required; names: "
                    "bayes-amb params)")
@@ -88,6 +96,7 @@ def format_summary(s: dict) -> str:
 def run(args: argparse.Namespace) -> int:
     priors = read_priors(args)
     rec = load_recording(args.recording)
+    check_rig_option(args, rec)
     update, bar = _progress_bar(not (args.no_progress or args.json or args.map_only))
     try:
         result = identify(rec, args.params, priors, IdentifyOptions(

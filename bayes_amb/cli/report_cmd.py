@@ -7,7 +7,7 @@ import sys
 import time
 from pathlib import Path
 
-from bayes_amb.cli.common import emit
+from bayes_amb.cli.common import add_rig_option, check_rig_option, emit
 from bayes_amb.report import PDF_BACKENDS, ReportOptions, collect_run, write_report
 
 
@@ -21,6 +21,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--recording", default=None, metavar="NAME.csv",
                    help="the recording (default: the path in summary.json, tried as given, "
                    "then next to RUN_DIR)")
+    add_rig_option(p)
     p.add_argument("--study", action="append", default=[], metavar="DIR",
                    help="a finished study folder to include (repeatable; default none)")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default RUN_DIR)")
@@ -41,6 +42,8 @@ def command_line(args: argparse.Namespace) -> list[str]:
     cmd = ["bayes-amb", "report", str(args.run_dir)]
     if args.recording:
         cmd += ["--recording", str(args.recording)]
+    if args.rig:
+        cmd += ["--rig", str(args.rig)]
     for s in args.study:
         cmd += ["--study", str(s)]
     if args.out:
@@ -60,6 +63,7 @@ def run(args: argparse.Namespace) -> int:
             sys.stderr.write(f"[{time.perf_counter() - t0:5.1f} s] {msg}\n")
 
     data = collect_run(args.run_dir, recording=args.recording, studies=args.study)
+    check_rig_option(args, data.recording)
     progress(f"read {args.run_dir}")
     result = write_report(data, args.out or args.run_dir, argv=command_line(args),
                           options=ReportOptions(), pdf=not args.no_pdf,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 
 from bayes_amb.cli.common import emit
+from bayes_amb.cli.options import real
 from bayes_amb.io.atomic import write_text_atomic
 
 
@@ -21,8 +22,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     q.add_argument("--name", default=None, help="rig name (default: the output file's stem)")
     q.add_argument("--speed-rpm", type=float, default=None,
                    help="nominal speed (default: the rotor's rated_w)")
-    q.add_argument("--zeta", type=float, default=0.005,
-                   help="first_mode_zeta of the rig (material damping, default 0.005)")
+    q.add_argument("--zeta", type=real(0, 1), default=None,
+                   help="first_mode_zeta of the rig, 0..1, replacing the ROSS shaft's "
+                   "material damping (default: from the shaft elements' beta, zeta = beta "
+                   "w1 / 2 with w1 the bare shaft's first free-free bending frequency)")
     q.add_argument("--json", action="store_true", help="print JSON")
     q.set_defaults(func=run_from_ross)
 

@@ -28,8 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--controller", default=None, metavar="FILE", help="controller JSON "
                    "(default: the reference controller designed for the rig and --dt)")
     p.add_argument("--truth", choices=("full", "reduced"), default="full",
-                   help="truth plant: full (the 320-state FE model) or reduced (the 8-state "
-                   "identification model) (default full)")
+                   help="truth plant: full (the rig's full-order FE model) or reduced (the "
+                   "8-state identification model) (default full)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=THETA",
                    help="true parameter value, theta in -0.95..0.95, e.g. k_By=0.5 "
                    "(repeatable; default: every parameter 0; names: bayes-amb params)")
@@ -43,13 +43,20 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--amplitude", type=real(0, lo_open=True, unit="A"), default=0.5,
                    metavar="A", help="excitation amplitude, A, > 0 (default 0.5, about 10 %% "
                    "of a 5 A saturation current)")
+    p.add_argument("--port", choices=("eta", "r2"), default=None,
+                   help="where the excitation enters: eta (the Youla port of an "
+                   "observer-based controller, column group eta_*) or r2 (added to the coil "
+                   "current after the controller, any controller, column group r2_*; the "
+                   "recorded u_* includes it) (default: eta for an observer controller, r2 "
+                   "otherwise)")
     p.add_argument("--band", default=None, metavar="LO,HI", help="multisine band, Hz, "
                    "0 < LO < HI <= Nyquist (default 5 Hz to min(1 kHz, 0.8 Nyquist)); a "
                    "narrow band informs only a combination of parameters")
     p.add_argument("--r1-rms", type=real(0, unit="m"), default=0.0, metavar="M",
                    help="sensor-side disturbance r1, RMS in m, >= 0 (default 0)")
     p.add_argument("--r2-rms", type=real(0, unit="A"), default=0.0, metavar="A",
-                   help="actuator-side disturbance r2, RMS in A, >= 0 (default 0)")
+                   help="actuator-side disturbance r2 (unknown, not recorded, not in u_*), "
+                   "RMS in A, >= 0 (default 0)")
     p.add_argument("--r1-band-hz", type=real(0, lo_open=True, unit="Hz"), default=None,
                    metavar="HZ", help="low-pass band of r1, Hz, > 0 (default: white)")
     p.add_argument("--r2-band-hz", type=real(0, lo_open=True, unit="Hz"), default=None,
@@ -106,7 +113,7 @@ def run(args: argparse.Namespace) -> int:
                            noise_rms=args.noise_rms, r1_rms=args.r1_rms, r2_rms=args.r2_rms,
                            r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz,
                            duration=args.duration, dt=args.dt, speed_rpm=args.speed_rpm,
-                           seed=args.seed)
+                           seed=args.seed, port=args.port)
     cfg.validate()                          # the options first, before any expensive work
     rig = load_rig(args.rig)
     if args.controller:

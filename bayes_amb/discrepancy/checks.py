@@ -6,10 +6,13 @@ is rotor physics, and none of it may be named as such. Each check here reports i
 a failed check is reported as such (the diagnosis then names no physics, see diagnose.py).
 
 controller   Is the recorded u what the documented controller makes from the recorded y
-             and excitation? The controller file is run from rest on [y + r1; eta]; the
-             difference to the recorded u must be at rounding level once the controller's
-             own initial state has died out (x = Vt u - Ut y equals
-             eta only for the documented controller).
+             and excitation? The recorded u is the current at the plant input and includes
+             an injected r2 (the convention of io/recording.py): u = K_u([y + r1; eta]) + r2.
+             The controller file is run from rest on [y + r1; eta] and r2 is added to its u
+             output (never fed to its eta port: a generic controller's eta port adds to its
+             output, so r2 through it as well would count it twice); the difference to the
+             recorded u must be at rounding level once the controller's own initial state
+             has died out (x = Vt u - Ut y equals eta only for the documented controller).
 start        Does the record start at rest? If the difference above is large in the first
              samples and then dies out, the controller (and so the loop) was running before
              the record began.
@@ -45,7 +48,7 @@ CONTROLLER_TOL = 1e-4
 which the record counts as starting at rest (CSV at full precision gives ~1e-15)."""
 
 CONTROLLER_SHARE = 1e-6
-"""Share of the power of u that may follow the excitation in u - K(y, eta) before the
+"""Share of the power of u that may follow the excitation in u - K(y, eta) - r2 before the
 documented controller counts as not the one that ran (a 0.1 % gain change gives ~1e-6)."""
 
 DECAY = 1e-3
@@ -103,7 +106,14 @@ def _controller_inputs(rec: Recording) -> NDArray:
 
 
 def recompute_u(rec: Recording) -> NDArray:
-    """The documented controller run from rest on the recorded [y + r1; eta]: u (N, 4)."""
+    """The current the documented controller puts at the plant input, (N, 4) in A.
+
+    u = K_u([y + r1; eta]) + r2: the controller file run from rest on the recorded
+    [y + r1; eta], plus the recorded r2 excitation added after its output. This is the one
+    rule for every controller kind; r2 never enters the file's eta port (a generic
+    controller adds its eta input to its output, so the same excitation through both would
+    be counted twice). Groups absent from the recording count as zero.
+    """
     ctrl = rec.controller
     v = _controller_inputs(rec)
     A, B, C, D = (np.asarray(m, dtype=float) for m in (ctrl.A, ctrl.B, ctrl.C, ctrl.D))
@@ -115,7 +125,8 @@ def recompute_u(rec: Recording) -> NDArray:
     for k in range(v.shape[0]):
         out[k] = Cu @ xs + feed[k]
         xs = A @ xs + drive[k]
-    return out
+    r2 = rec.excitation.get("r2")
+    return out if r2 is None else out + np.asarray(r2, dtype=float)
 
 
 def settle_samples(poles: NDArray, n: int, decay: float = DECAY) -> int:
@@ -163,7 +174,7 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
     """Controller consistency and start at rest; returns both checks and the samples the
     controller's initial state needs to die out.
 
-    The difference d = u - K(y + r1, eta) is the controller's own start-up transient (when
+    The difference d = u - K(y + r1, eta) - r2 is the controller's own start-up transient (when
     the record starts mid-operation), plus K applied to any unrecorded sensor-side
     disturbance, plus - if the firmware is not the documented controller - a part driven by
     the excitation. Only the last counts against the documentation: the check fails when a

@@ -59,7 +59,8 @@ from bayes_amb.discrepancy.unexplained import unexplained_block
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import Prior
 from bayes_amb.inference.sampler import initial_ball, run_emcee
-from bayes_amb.io.atomic import json_text, write_netcdf_atomic, write_text_atomic
+from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
+from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
 from bayes_amb.threads import limited_threads
@@ -140,7 +141,7 @@ class Diagnosis:
                 (f"step{i + 1}_{fm.candidates[-1].effect}", fm)
                 for i, fm in enumerate(sel.accepted)]:
             write_netcdf_atomic(_posterior_dataset(fm), d / "models" / f"{tag}.nc")
-        write_text_atomic(d / "diagnosis.json", json_text(self.report) + "\n")
+        write_text_atomic(d / "diagnosis.json", result_json_text(self.report))
         return d
 
 

@@ -87,7 +87,7 @@ def plant_matrices(rig: Rig, speed_rpm: float, theta: dict[str, float],
                    model: str = "full") -> tuple[NDArray, NDArray, NDArray]:
     """Continuous (A, B, C) of the plant with the parameters ``theta`` (name -> value).
 
-    ``full``: 320-state FE model with the physical changes dK, dC of each parameter;
+    ``full``: the rig's full-order FE model with the physical changes dK, dC of each parameter;
     ``reduced``: the 8-state pseudo-modal reduction with the reduced LFT (eqs. 51-52).
     """
     if model not in MODEL_KINDS:

@@ -8,7 +8,6 @@
 
 from __future__ import annotations
 
-import json
 import math
 import time
 from collections.abc import Callable
@@ -36,6 +35,7 @@ from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
 from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec, parse_param_list
@@ -90,7 +90,7 @@ class IdentificationResult:
         d.mkdir(parents=True, exist_ok=True)
         if self.posterior is not None:
             save_datatree(self.posterior, d / "posterior.nc")
-        write_text_atomic(d / "summary.json", json.dumps(self.summary, indent=2) + "\n")
+        write_text_atomic(d / "summary.json", result_json_text(self.summary))
         return d
 
 

@@ -32,7 +32,11 @@ Example (a dSPACE .mat file, positions in volts, currents as amplifier set-point
     gain = 0.5                   # A/V (amplifier transconductance)
 
 Targets: ``y_*`` and ``u_*`` for all four channels (Ax, Ay, Bx, By), plus at least one
-complete excitation group ``eta_*``, ``r2_*`` or ``r1_*``. Conversion to SI::
+complete excitation group ``eta_*``, ``r2_*`` or ``r1_*``. ``u_*`` must be the current at
+the plant input *including* an injected ``r2``: u = K(y + r1, eta) + r2 (the convention of
+:mod:`bayes_amb.io.recording`). Map ``u_*`` to the signal after the excitation was added
+(the amplifier reference); if your DAQ logged only the controller output, add the
+excitation to it before the import. Conversion to SI::
 
     value = sign * factor(unit) * (raw - offset)
 

@@ -202,8 +202,8 @@ def _modal_sensitivity(Ap: NDArray, Bp: NDArray, Cp: NDArray, K: tuple[NDArray, 
                        dt: float, n_freq: int = 600) -> Any:
     """Per-axis sensitivity as :func:`bayes_amb.control.robustness.sensitivity` computes it
     (same grid), with G(z) = C V diag(1/(z - lambda)) V^-1 B from one eigendecomposition
-    instead of one solve per frequency (about 100 times faster on the 320-state plant;
-    relative difference of G about 3e-10 on the reference rig)."""
+    instead of one solve per frequency (about 100 times faster on the reference rig's
+    320-state plant; relative difference of G about 3e-10 there)."""
     from bayes_amb.control.discrete import ss_freqresp
     from bayes_amb.control.robustness import sensitivity_from_response, sensitivity_grid
 

@@ -6,10 +6,16 @@ precision (e.g. ``%.17g``). Columns, in any order:
 
 - ``t`` (s): uniform and strictly increasing (every step equal to ``dt`` within 1e-6)
 - ``y_Ax, y_Ay, y_Bx, y_By`` (m): measured displacements
-- ``u_Ax, u_Ay, u_Bx, u_By`` (A): control currents
+- ``u_Ax, u_Ay, u_Bx, u_By`` (A): the coil currents at the plant input, *including* any
+  injected ``r2`` excitation: u = K_u([y + r1; eta]) + r2, with K_u the u rows of the
+  controller file (the one convention of the simulator, the data check
+  :func:`bayes_amb.discrepancy.checks.recompute_u` and the identification model). Record
+  the current the amplifier is commanded with after the excitation was added.
 - the excitation that was applied, one or more groups of all four channels:
-  ``eta_*`` (A, at the Youla port of the controller), ``r2_*`` (A, added to the current at
-  the plant input), ``r1_*`` (m, added to the measured output)
+  ``eta_*`` (A, at the Youla port of an observer-based controller, inside it),
+  ``r2_*`` (A, added to the controller's output current at the plant input, any controller;
+  already part of ``u_*``), ``r1_*`` (m, added to the measured output the controller sees;
+  not part of ``y_*``)
 
 Unknown, missing or duplicated columns, empty or non-numeric cells, NaN, inf and fewer
 than 2 rows are errors. ``NAME.json``: an object with exactly these keys (``notes``,

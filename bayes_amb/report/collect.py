@@ -26,6 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.io.nonfinite import restore_non_finite
 from bayes_amb.io.recording import Recording, load_recording, load_truth, recording_paths
 from bayes_amb.uncertainty import get_spec
 
@@ -167,7 +168,7 @@ def _read_json(path: Path, what: str) -> dict[str, Any]:
         raise ReportError(f"{what} {path}: not valid JSON ({exc})") from None
     if not isinstance(data, dict):
         raise ReportError(f"{what} {path}: expected a JSON object, got {type(data).__name__}")
-    return data
+    return restore_non_finite(data)
 
 
 def _read_summary(run_dir: Path) -> dict[str, Any]:

@@ -250,7 +250,8 @@ def controller_data(run: RunData, d: Derived, n_freq: int = 300) -> dict[str, An
         A_true = pl.A_theta(np.array([true[n] for n in run.names]))
         curves.append(("true G(θ) (simulated)", _sv(A_true, pl.B, pl.C, w)))
     return {"g": (g_nom, g_id), "s": s_id, "channel": CHANNELS[j],
-            "sens": (sens_nom, sens_id), "sv": (w, curves)}
+            "sens": (sens_nom, sens_id), "sv": (w, curves),
+            "full_states": int(d.full.n_states), "rig_name": rec.rig.name}
 
 
 def _sv(A: NDArray, B: NDArray, C: NDArray, w: NDArray) -> NDArray:

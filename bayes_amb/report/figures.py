@@ -123,8 +123,9 @@ def controller_figures(cd: dict[str, Any], dt: float) -> list[ReportFigure]:
         render_figure(pc.plot_sensitivity([("nominal plant", sens[0]),
                                            ("identified plant", sens[1])]),
                       "sensitivity", "Sensitivity per axis (ISO 14839-3)",
-                      "Diagonal of (I − G K)⁻¹ with the 320-state plant and the recorded "
-                      "controller, other loops closed."),
+                      f"Diagonal of (I − G K)⁻¹ with the {cd['full_states']}-state FE plant "
+                      f"of rig '{cd['rig_name']}' and the recorded controller, other loops "
+                      "closed."),
         render_figure(pc.plot_plant_singular_values(*cd["sv"]), "sv_plant",
                       "Nominal and identified plant (paper Fig. 8)",
                       "Singular values of the reduced LFT plant at θ = 0, at the posterior "

@@ -5,11 +5,13 @@ from bayes_amb.rig.rig import (
     Disc,
     Rig,
     Shaft,
+    check_rig_matches,
     check_speed_rpm,
     load_rig,
     node_label,
+    rig_difference,
     rig_from_dict,
 )
 
-__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "check_speed_rpm", "load_rig", "node_label",
-           "rig_from_dict"]
+__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "check_rig_matches", "check_speed_rpm",
+           "load_rig", "node_label", "rig_difference", "rig_from_dict"]

@@ -312,3 +312,54 @@ def check_speed_rpm(rig: Rig, speed_rpm: float | None = None) -> float:
         raise RigError(f"option --speed-rpm: value {speed:g} out of range: must be in "
                        f"0..{top:g} rpm")
     return speed
+
+
+def _flat(d: Any, prefix: str = "") -> dict[str, Any]:
+    """{"shaft.length": 0.45, "discs[0].mass": 6.0, ...} of a rig-file dict."""
+    if isinstance(d, dict):
+        out: dict[str, Any] = {}
+        for k, v in d.items():
+            out.update(_flat(v, f"{prefix}.{k}" if prefix else str(k)))
+        return out
+    if isinstance(d, (list, tuple)):
+        out = {f"{prefix}.count": len(d)}
+        for i, v in enumerate(d):
+            out.update(_flat(v, f"{prefix}[{i}]"))
+        return out
+    return {prefix: d}
+
+
+def rig_difference(a: Rig, b: Rig, rtol: float = 1e-9) -> str | None:
+    """The first field in which two rigs differ as models, ``"shaft.length: 0.6 against
+    0.65"``, or None when they describe the same rotor. The name and description are labels
+    and not compared; numbers agree to ``rtol`` (relative).
+
+    Examples
+    --------
+    >>> rig_difference(load_rig(), load_rig()) is None
+    True
+    >>> rig_difference(load_rig(), load_rig("small_rotor"))
+    'shaft.youngs_modulus: 211000000000.0 against 205000000000.0'
+    """
+    fa, fb = _flat(a.to_dict()), _flat(b.to_dict())
+    for key in [*fa, *(k for k in fb if k not in fa)]:
+        if key in ("name", "description"):
+            continue
+        va, vb = fa.get(key), fb.get(key)
+        same = (va == vb if not (isinstance(va, float) and isinstance(vb, (int, float)))
+                else abs(va - vb) <= rtol * max(abs(va), abs(vb)))
+        if not same:
+            return f"{key}: {va!r} against {vb!r}"
+    return None
+
+
+def check_rig_matches(path: str | Path, embedded: Rig, where: str) -> None:
+    """Refuse (RigError, one line naming both) when the rig file ``path`` (or a shipped
+    rig's name) is not the rig embedded in ``where`` (a recording): a model is always built
+    from the recording's own rig, and ``--rig`` only checks that it is the one meant."""
+    given = load_rig(path)
+    diff = rig_difference(given, embedded)
+    if diff is not None:
+        raise RigError(f"option --rig: rig file {path} is not the rig embedded in {where} "
+                       f"({given.name!r} against {embedded.name!r}); first difference "
+                       f"{diff} (file against recording)")

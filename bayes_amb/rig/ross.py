@@ -12,10 +12,19 @@ What maps, one to one (ROSS nodes are 0-based, rig nodes 1-based):
   negative stiffness with its sign; the rig file the magnitude, f = ki i + ks s); both
   bearings must share ki and ks. Each bearing's ``sensor_node`` gives ``[sensors]``.
 - ``rated_w`` (rad/s), when set, gives ``nominal_speed_rpm``.
+- the shaft's stiffness-proportional material damping ``beta`` (ROSS: C = alpha M + beta K
+  per element) -> ``[damping] first_mode_zeta``: the rig's damping is C = beta K_shaft with
+  beta = 2 zeta / w1 (w1 the bare shaft's first free-free bending frequency,
+  rotor.assembly), so zeta = beta w1 / 2 carries ROSS's beta exactly. An explicit
+  ``first_mode_zeta`` (``--zeta``) replaces it, and the conversion notes that.
 
-ROSS's own bearing controller (PID gains, transfer function), seals, point masses and
-axial/torsional DOFs are not part of a rig; the controller is designed or imported
-separately (``bayes-amb controller``, ``bayes-amb import-controller``).
+Refused with one line naming the element and field (the rig would silently differ):
+mass-proportional damping (``alpha`` != 0), ``beta`` varying along the shaft, an axial
+force or torque on a shaft element, ``rotary_inertia=False`` or ``gyroscopic=False`` (the
+rig always has both), point masses. ROSS's own bearing controller (PID gains, transfer
+function) is not part of a rig and is noted; seals and other bearings are refused (above);
+axial/torsional DOFs are not modelled. The controller is designed or imported separately
+(``bayes-amb controller``, ``bayes-amb import-controller``).
 """
 
 from __future__ import annotations
@@ -54,7 +63,8 @@ def _same(values: list[float]) -> bool:
 
 
 def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross rotor>",
-                  nominal_speed_rpm: float | None = None, first_mode_zeta: float = 0.005,
+                  nominal_speed_rpm: float | None = None,
+                  first_mode_zeta: float | None = None,
                   c_ref: float = 1000.0, k_ref: float = 1.0e5) -> RossConversion:
     """Convert a ``ross.Rotor`` to a :class:`~bayes_amb.rig.Rig` (module docstring).
 
@@ -66,8 +76,11 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
         Rig name; where the rotor came from (for messages).
     nominal_speed_rpm : float, optional
         Default: the rotor's ``rated_w`` in rpm; required if that is not set.
-    first_mode_zeta, c_ref, k_ref : float
-        Rig values ROSS does not hold (material damping, parameter scales).
+    first_mode_zeta : float, optional
+        Default: from the ROSS shaft's ``beta`` (zeta = beta w1 / 2, module docstring);
+        a value given replaces it (noted).
+    c_ref, k_ref : float
+        Rig values ROSS does not hold (parameter scales).
 
     Raises
     ------
@@ -103,6 +116,30 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
     for k, label in enumerate(("E", "rho", "Poisson")):
         if not _same([m[k] for m in mats]):
             raise fail("shaft_elements", f"material {label} varies along the shaft")
+    for e in shafts:
+        for attr, label in (("alpha", "mass-proportional damping alpha"),
+                            ("axial_force", "axial force"), ("torque", "torque")):
+            v = float(getattr(e, attr, 0.0) or 0.0)
+            if v != 0.0:
+                raise fail(f"shaft element {e.n}", f"{label} {v!r} has no rig equivalent (a "
+                           "rig holds stiffness-proportional damping beta only, and no "
+                           "axial load)" if attr == "alpha" else f"{label} {v!r} has no rig "
+                           "equivalent (a rig has no axial load or torque stiffening)")
+        for attr in ("rotary_inertia", "gyroscopic"):
+            if getattr(e, attr, True) is False:
+                raise fail(f"shaft element {e.n}", f"{attr}=False; a rig always models "
+                           "rotary inertia and gyroscopics (build the ROSS rotor with "
+                           f"{attr}=True)")
+    betas = [float(getattr(e, "beta", 0.0) or 0.0) for e in shafts]
+    if not _same(betas) and not all(b == 0.0 for b in betas):
+        i = next(i for i, v in enumerate(betas) if not math.isclose(v, betas[0],
+                                                                     rel_tol=_RTOL))
+        raise fail(f"shaft element {shafts[i].n}", f"damping beta {betas[i]!r} differs from "
+                   f"element {shafts[0].n}'s {betas[0]!r} (a rig has one material damping)")
+    points = list(getattr(rotor, "point_mass_elements", None) or [])
+    if points:
+        raise fail(f"point mass at node {points[0].n}", f"{len(points)} point mass "
+                   "element(s); a rig has no point masses (model them as discs)")
     if any(getattr(e, "shear_effects", False) for e in shafts):
         notes.append("shear deformation (ROSS shear_effects=True) is not modelled: "
                      "Euler-Bernoulli beams with rotary inertia")
@@ -130,21 +167,56 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
             raise fail("rated_w", "not set; give nominal_speed_rpm")
         speed = float(rated) * 60.0 / (2.0 * math.pi)
     m0 = mats[0]
-    data = {"name": name,
+    beta = betas[0]
+    data = _rig_data(name, source, m0, shafts, n_nodes, discs, ki[0], ks[0], mbs, 0.0,
+                     speed, c_ref, k_ref)
+    zeta_ross = _zeta_of_beta(beta, rig_from_dict(data, source=source))
+    if first_mode_zeta is None:
+        first_mode_zeta = zeta_ross
+        if beta == 0.0:
+            notes.append("the ROSS shaft has no material damping (beta = 0): "
+                         "first_mode_zeta = 0 (give --zeta to add some)")
+    elif not math.isclose(first_mode_zeta, zeta_ross, rel_tol=1e-6, abs_tol=1e-12):
+        notes.append(f"first_mode_zeta {first_mode_zeta:g} given replaces the ROSS shaft's "
+                     f"damping (beta {beta:g} s, i.e. first_mode_zeta {zeta_ross:.6g})")
+    if mbs and any(getattr(b, "kp_pid", None) for b in mbs):
+        notes.append("the ROSS bearings' controller (kp_pid, kd_pid, k_amp, k_sense) is not "
+                     "part of a rig: design one (bayes-amb controller) or import the real "
+                     "one (bayes-amb import-controller)")
+    data = _rig_data(name, source, m0, shafts, n_nodes, discs, ki[0], ks[0], mbs,
+                     float(first_mode_zeta), speed, c_ref, k_ref)
+    rig = rig_from_dict(data, source=source)
+    return RossConversion(rig=rig, data=data, notes=tuple(notes))
+
+
+def _rig_data(name: str, source: str, m0: tuple[float, float, float], shafts: list[Any],
+              n_nodes: int, discs: list[dict[str, Any]], ki: float, ks: float, mbs: list[Any],
+              zeta: float, speed: float, c_ref: float, k_ref: float) -> dict[str, Any]:
+    """The rig-file dict of a converted rotor."""
+    return {"name": name,
             "description": f"converted from ROSS rotor {Path(source).name}",
             "shaft": {"youngs_modulus": m0[0], "density": m0[1], "poisson": m0[2],
                       "diameter": float(shafts[0].odl),
                       "length": float(sum(float(e.L) for e in shafts)), "n_nodes": n_nodes},
             "discs": discs,
-            "bearings": {"ki": ki[0], "ks": ks[0], "A": {"node": int(mbs[0].n) + 1},
+            "bearings": {"ki": ki, "ks": ks, "A": {"node": int(mbs[0].n) + 1},
                          "B": {"node": int(mbs[1].n) + 1}},
             "sensors": {"A": {"node": int(getattr(mbs[0], "sensor_node", mbs[0].n)) + 1},
                         "B": {"node": int(getattr(mbs[1], "sensor_node", mbs[1].n)) + 1}},
-            "damping": {"first_mode_zeta": float(first_mode_zeta)},
+            "damping": {"first_mode_zeta": zeta},
             "operation": {"nominal_speed_rpm": float(speed)},
             "uncertainty": {"c_ref": float(c_ref), "k_ref": float(k_ref)}}
-    rig = rig_from_dict(data, source=source)
-    return RossConversion(rig=rig, data=data, notes=tuple(notes))
+
+
+def _zeta_of_beta(beta: float, rig: Rig) -> float:
+    """first_mode_zeta = beta w1 / 2, w1 the first free-free bending frequency (rad/s) of
+    the rig's bare shaft (rotor.assembly.first_free_free_bending)."""
+    if beta == 0.0:
+        return 0.0
+    from bayes_amb.rotor.assembly import first_free_free_bending, shaft_matrices
+
+    M, K, _ = shaft_matrices(rig)
+    return 0.5 * beta * first_free_free_bending(M, K)
 
 
 def _value(v: Any) -> str:

@@ -4,12 +4,15 @@ Signals (Fig. 2 of the paper) at sample k:
 
     y_meas = sensor_gain * C x + n          recorded displacement (sensor noise n)
     y_c    = y_meas + r1                    what the controller sees (r1: sensor-side)
-    [u; eps_c] = controller([y_c; eta])     eta: the controller's excitation port
+    [k; eps_c] = controller([y_c; eta])     eta: the controller's excitation port
+    u      = k + e2                         e2: excitation added after the controller
     u_plant = u + r2                        r2: actuator-side disturbance (not recorded)
     x+      = exact ZOH of the plant over one sample, with the input delayed by delay_s
 
-The recorded current is the controller output u (it includes eta when the controller adds
-it at its output, as a generic controller's exported form does).
+The recorded current u is the current at the plant input and includes any injected
+excitation (the convention of io/recording.py): e2 when the excitation is injected after
+the controller (port ``r2``), and eta when the controller adds it at its output, as a
+generic controller's exported form does. Only the unknown disturbance r2 is not in u.
 The delay tau = m dt + phi (0 <= phi < dt) is exact under ZOH:
 x[k+1] = Ad x[k] + Gamma(dt - phi) u[k-m] + e^{A(dt-phi)} Gamma(phi) u[k-m-1].
 """
@@ -99,12 +102,21 @@ def closed_loop_spectral_radius(truth: TruthPlant,
 
 def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray, NDArray],
                   dt: float, eta: NDArray, noise: NDArray | None = None,
-                  r1: NDArray | None = None, r2: NDArray | None = None) -> LoopSignals:
+                  r1: NDArray | None = None, r2: NDArray | None = None,
+                  port: str = "eta") -> LoopSignals:
     """Run the loop for len(eta) samples from rest. controller = (Ak, Bk, Ck, Dk) with
     inputs [y (4); eta (4)] and outputs [u (4); eps (4)].
+
+    port: where the excitation ``eta`` (n, 4) enters: ``"eta"``, the controller's eta
+    port; ``"r2"``, added to the controller's output current (the eta port stays zero).
+    Either way the recorded u includes what the excitation adds to the plant current.
     """
+    if port not in ("eta", "r2"):
+        raise ValueError(f"port: expected 'eta' or 'r2' instead of {port!r}")
     n = eta.shape[0]
     zeros = np.zeros_like(eta)
+    e2 = eta if port == "r2" else zeros
+    eta = zeros if port == "r2" else eta
     noise = zeros if noise is None else noise
     r1 = zeros if r1 is None else r1
     r2 = zeros if r2 is None else r2
@@ -141,9 +153,9 @@ def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray
         out = Ck @ xk + Dk @ v
         xk = Ak @ xk + Bk @ v
         y_rec[k] = y
-        u_rec[k] = out[:4]
+        u_rec[k] = out[:4] + e2[k]
         eps[k] = out[4:]
-        u_hist[k + off] = out[:4] + r2[k]
+        u_hist[k + off] = u_rec[k] + r2[k]
         x = Ad @ x + G_now @ u_hist[k + off - m_del] + G_prev @ u_hist[k + off - m_del - 1] \
             + force_term[k]
         if k % 256 == 0 and not np.all(np.isfinite(x)):

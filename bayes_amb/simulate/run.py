@@ -27,12 +27,18 @@ from bayes_amb.uncertainty import get_spec
 class SimulationConfig:
     """What to simulate. SI units: amplitude in A, noise_rms and r1_rms in m, r2_rms in A.
 
-    Defaults: full 320-state truth, 0.5 s at 10 kHz, random binary excitation of 0.5 A
+    Defaults: full-order FE truth, 0.5 s at 10 kHz, random binary excitation of 0.5 A
     (about 10 % of a 5 A saturation current), no noise or disturbances, nominal speed.
     ``r1_band_hz``/``r2_band_hz`` None means white; otherwise low-pass band-limited.
     ``excitation_band_hz`` (lo, hi) sets the band of a multisine excitation (default 5 Hz to
     min(1 kHz, 0.8 Nyquist)); a narrow band is how a test that informs only a combination of
     parameters is simulated.
+
+    ``port`` is where the excitation enters: ``"eta"``, the controller's Youla port (an
+    observer-based controller only); ``"r2"``, added to the controller's output current at
+    the plant input (any controller kind). None (default) takes ``eta`` for an observer
+    controller and ``r2`` otherwise. The recording stores the excitation under the group of
+    that name, and its u is the plant current including an r2 excitation.
     """
 
     truth: str = "full"
@@ -50,6 +56,7 @@ class SimulationConfig:
     dt: float = 1e-4
     speed_rpm: float | None = None
     seed: int = 0
+    port: str | None = None
 
     def validate(self) -> None:
         if not (np.isfinite(self.amplitude) and self.amplitude > 0):
@@ -89,6 +96,8 @@ class SimulationConfig:
                 raise BayesAmbError(f"option --band: value {band[0]:g},{band[1]:g} out of "
                                     f"range: must be 0 < LO < HI <= {0.5 / self.dt:g} Hz "
                                     "(Nyquist)")
+        if self.port not in (None, "eta", "r2"):
+            raise BayesAmbError(f"option --port: value {self.port!r} not one of eta, r2")
         if not 0 <= self.seed < 2**32:
             raise BayesAmbError(f"option --seed: value {self.seed} out of range: must be in "
                                 "0..4294967295")
@@ -106,12 +115,18 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
                        ) -> tuple[Recording, dict[str, Any]]:
     """Simulate one closed-loop recording; returns (recording, truth).
 
-    The excitation enters the controller's eta port: for an observer-based controller that
-    is the Youla port (column group ``eta``); a generic controller adds it to its output
-    current (plant input, column group ``r2``).
+    The excitation enters at ``config.port``: the controller's Youla port (column group
+    ``eta``, observer-based controllers only) or the plant input after the controller
+    (column group ``r2``, any controller; a generic controller's eta port is that same
+    sum). The recorded u is the plant current and includes an r2 excitation.
     """
     config.validate()
     check_fits_rig(controller)
+    port = config.port or ("eta" if controller.kind == "observer" else "r2")
+    if port == "eta" and controller.kind != "observer":
+        raise BayesAmbError(f"option --port: eta needs an observer-based controller; "
+                            f"controller {controller.source} is kind {controller.kind!r}, "
+                            "which has no Youla port (use --port r2)")
     if abs(controller.dt - config.dt) > 1e-12 * config.dt:
         raise BayesAmbError(f"controller {controller.source}: field dt: {controller.dt} s "
                             f"does not match the simulation dt {config.dt} s")
@@ -125,14 +140,13 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
     r2 = gaussian_noise(n, 4, config.r2_rms, streams[3], config.dt, config.r2_band_hz)
     truth_plant = build_truth(rig, speed, config.truth, config.params, config.effects)
     sig = simulate_loop(truth_plant, (controller.A, controller.B, controller.C, controller.D),
-                        config.dt, exc, noise=noise, r1=r1, r2=r2)
+                        config.dt, exc, noise=noise, r1=r1, r2=r2, port=port)
     if sig.unstable:
         raise BayesAmbError("simulation: the closed loop is unstable for this truth "
                             f"(params {config.params}, effects "
                             f"{[e.name for e in config.effects]}); the controller does not "
                             "stabilise it")
-    group = "eta" if controller.kind == "observer" else "r2"
-    rec = make_recording(sig.y, sig.u, {group: exc}, config.dt, controller, speed_rpm=speed,
+    rec = make_recording(sig.y, sig.u, {port: exc}, config.dt, controller, speed_rpm=speed,
                          rig=rig, notes=f"simulated by bayes-amb {__version__}",
                          provenance={"software": f"bayes-amb {__version__}",
                                      "simulator": "bayes_amb.simulate", "seed": config.seed})

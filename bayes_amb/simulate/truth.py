@@ -51,7 +51,7 @@ def _lag_channels(bearing: str) -> list[int]:
 def build_truth(rig: Rig, speed_rpm: float, kind: str = "full",
                 params: dict[str, float] | None = None,
                 effects: list[Effect] | tuple[Effect, ...] = ()) -> TruthPlant:
-    """Build the truth plant: 'full' (320-state FE) or 'reduced' (8 + 4k states).
+    """Build the truth plant: 'full' (the rig's full-order FE) or 'reduced' (8 + 4k states).
 
     params maps parameter names (k_By, c_Ax, kxy_D1, ...) to true theta values.
 
