@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from bayes_amb.discrepancy.checks import DataChecks, run_checks
+from bayes_amb.discrepancy.fitstats import fit_quality
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
 from bayes_amb.discrepancy.linearity import linearity_check
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
@@ -125,5 +126,4 @@ def assess(recording: Recording, names: tuple[str, ...],
 
 def worst_nrmse(fm: FittedModel, eps: np.ndarray) -> float:
     """The largest NRMSE of a fitted model's residual over the channels."""
-    from bayes_amb.discrepancy.fitstats import fit_quality
     return float(max(fit_quality(fm, eps)["nrmse"].values()))

@@ -167,9 +167,7 @@ class RobustWhittle(WhittleLikelihood):
         residual bin in the Gauss-Newton curvature of the band's log p(R_b) (the noise
         spectrum integrated out); (n_bands, 4, 4)."""
         Pb, _ = self.band_sums(np.atleast_2d(theta))
-        sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
-        Psi = (np.tensordot(sig2, self.phi_sources, axes=(0, 0)) * self.n
-               * (self.nu - self.shift)[:, None, None])
+        Psi = self.noise_spectrum(log10_sigma) * (self.nu - self.shift)[:, None, None]
         return (self.nu + self.counts)[:, None, None] * np.linalg.inv(Psi + Pb[0])
 
     def pointwise(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:

@@ -36,6 +36,7 @@ from scipy import stats
 from scipy.signal import lfilter
 
 from bayes_amb.discrepancy.checks import Check
+from bayes_amb.discrepancy.locate import locate_bands
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import CHANNELS
 
@@ -106,7 +107,6 @@ def clipping(like, params: NDArray, u: NDArray) -> tuple[bool, float, float, lis
     like: the model's likelihood (its residual DFT, prefilter, window and bins); u (N, 4)
     the recorded currents as they entered eps. Returns (found, p_adjusted, threshold in A
     of the strongest, channels)."""
-    from bayes_amb.discrepancy.locate import locate_bands
     R = like.residual_dft(np.atleast_2d(params))[0][0]                  # (nf, 4)
     start = getattr(like, "start", 0)
 
@@ -123,10 +123,10 @@ def clipping(like, params: NDArray, u: NDArray) -> tuple[bool, float, float, lis
     Rr = _residualise(R, U, narrow)
     best = (1.0, 0.0, [])
     tests = 0
+    dev = u - np.median(u, axis=0)                          # about the record's centre
     for q in QUANTILES:
-        thr = np.quantile(np.abs(u - np.median(u, axis=0)), q, axis=0)
-        centre = np.median(u, axis=0)
-        d = np.clip(u - centre, -thr, thr) - (u - centre)
+        thr = np.quantile(np.abs(dev), q, axis=0)
+        d = np.clip(dev, -thr, thr) - dev
         D = _residualise(dft(d), U, narrow)
         p = _partial_p(Rr, D, wide, keep)
         fisher = -2 * np.sum(np.log(np.maximum(p, 1e-300)), axis=0)

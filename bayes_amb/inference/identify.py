@@ -49,8 +49,8 @@ NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 throu
 class IdentifyOptions:
     """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only, map_method
     (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max),
-adequacy (run the diagnosis' data checks and location tests on the same model and report
-the verdict as summary['adequacy'], discrepancy/adequacy.py; about one nominal fit),
+    adequacy (run the diagnosis' data checks and location tests on the same model and
+    report the verdict as summary['adequacy'], discrepancy/adequacy.py; one nominal fit),
     noise_model ("loop": the coloured loop noise model; "iid": white Gaussian eps, the naive
     model, kept to show that it is overconfident), moves ("laplace": differential evolution
 mixed with independence proposals from the Laplace approximation at the MAP, the default;

@@ -418,14 +418,18 @@ class WhittleLikelihood:
         ll[bad] = -np.inf
         return ll
 
+    def noise_spectrum(self, log10_sigma: NDArray) -> NDArray:
+        """Phi_b, the 4 x 4 noise spectrum of a residual bin in each band at one row of
+        log10 sigma (as pointwise forms it for a batch); (n_bands, 4, 4)."""
+        sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
+        return np.tensordot(sig2, self.phi_sources, axes=(0, 0)) * self.n
+
     def curvature_weights(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Per band the weight W_b of a residual bin in the Gauss-Newton curvature,
         -d2 log L = 2 Re sum_k J_k^H W_b J_k (J = dR_k/dparameter): here Phi_b^-1, the
         inverse noise spectrum at log10 sigma (theta: where the filters were set);
         (n_bands, 4, 4). Used by discrepancy.model_error."""
-        sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
-        Phi = np.tensordot(sig2, self.phi_sources, axes=(0, 0)) * self.n
-        return np.linalg.inv(Phi)
+        return np.linalg.inv(self.noise_spectrum(log10_sigma))
 
     def __call__(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Total log-likelihood (nb,), including the Jacobian of the eps scaling."""
