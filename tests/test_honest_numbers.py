@@ -7,7 +7,7 @@ import pytest
 
 from bayes_amb.discrepancy.adequacy import judge
 from bayes_amb.discrepancy.checks import Check
-from bayes_amb.discrepancy.linearity import _partial_p, flat_tops
+from bayes_amb.discrepancy.linearity import flat_tops
 from bayes_amb.discrepancy.model_error import _fit_tau
 
 
@@ -36,18 +36,6 @@ def test_flat_tops_find_a_clipped_current_and_not_a_noisy_one():
     assert len(found) == 1 and found[0].startswith("u_Bx")
 
 
-def test_partial_regression_finds_d_and_not_noise():
-    rng = np.random.default_rng(2)
-    n = 4000
-    D = rng.normal(size=(n, 4)) + 1j * rng.normal(size=(n, 4))
-    noise = rng.normal(size=(n, 4)) + 1j * rng.normal(size=(n, 4))
-    wide = np.array_split(np.arange(n), 8)
-    p_null = _partial_p(noise, D, wide, 1.0)
-    assert p_null.min() * p_null.size > 1e-3                     # Bonferroni: nothing
-    p_hit = _partial_p(noise + 0.3 * D[:, ::-1], D, wide, 1.0)
-    assert p_hit.max() < 1e-6
-
-
 def _checks(*failed):
     cs = tuple(Check(n, n not in failed, n) for n in ("excitation", "controller", "linearity"))
     return SimpleNamespace(checks=cs, failed=list(failed))
@@ -66,6 +54,9 @@ def test_adequacy_line_says_what_was_found():
     assert not a.adequate and "120-450 Hz" in a.line and "diagnose" in a.line
     assert a.channels == ["Ax"]
     a = judge(_checks("linearity"), _loc(False), 0.3)
-    assert not a.adequate and a.failed == ["linearity"] and "NOT assessed" in a.line
+    assert not a.adequate and a.failed == ["linearity"] and a.nonlinear
+    assert "not linear" in a.line and "unreliable" in a.line
+    a = judge(_checks("controller"), _loc(False), 0.3)
+    assert not a.adequate and not a.nonlinear and "NOT assessed" in a.line
     a = judge(_checks(), _loc(True), 1e-9)                    # rounding, not a mismatch
     assert a.adequate and "rounding" in a.line

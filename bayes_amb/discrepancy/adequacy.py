@@ -19,11 +19,13 @@ from typing import Any
 
 import numpy as np
 
-from bayes_amb.discrepancy.checks import DataChecks, run_checks
+from bayes_amb.discrepancy.checks import DataChecks, recompute_u, run_checks
 from bayes_amb.discrepancy.fitstats import fit_quality
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
-from bayes_amb.discrepancy.linearity import linearity_check
+from bayes_amb.discrepancy.linearity import (clip_defect, clipping, flat_top_channels,
+                                             linearity_check, r2_response)
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
+from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
@@ -35,20 +37,20 @@ class Adequacy:
     """Whether the model is adequate for the recording, in one line, and where not.
 
     channels and bands_hz: where the mismatch tests found structure the model leaves;
-    failed: the data checks that failed; suspected: a nonlinearity suspected (not proven)
-    by the clipping test (linearity.py)."""
+    failed: the data checks that failed; nonlinear: the linearity check failed (a clipped
+    current or a held probe, linearity.py)."""
 
     adequate: bool
     line: str
     channels: list[str] = field(default_factory=list)
     bands_hz: list[list[float]] = field(default_factory=list)
     failed: list[str] = field(default_factory=list)
-    suspected: bool = False
+    nonlinear: bool = False
 
     def to_dict(self) -> dict[str, Any]:
         return {"adequate": self.adequate, "line": self.line, "channels": self.channels,
                 "bands_hz": self.bands_hz, "failed_checks": self.failed,
-                "nonlinearity_suspected": self.suspected}
+                "nonlinear": self.nonlinear}
 
 
 def loop_poles(fwd: ForwardModel) -> np.ndarray:
@@ -72,14 +74,22 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None) -> Adeq
     nrmse: the largest NRMSE of its residual over the channels, when known."""
     lin = next((c for c in checks.checks if c.name == "linearity"), None)
     exact = nrmse is not None and nrmse < ROUNDING
-    suspected = bool(lin is not None and lin.values.get("clipping_suspected")) and not exact
-    note = (" A clipping amplifier is suspected (see the linearity check): keep the "
-            "currents below its limit." if suspected else "")
+    nonlinear = lin is not None and not lin.ok
+    if nonlinear:
+        limit = lin.values.get("clipping_limit_a")
+        how = {"command": f"the coefficients were estimated with an amplifier limit of "
+                          f"about {limit or 0:.3g} A modelled, and stay marked unreliable",
+               "coil": "the coefficients were estimated with the clipped coil current "
+                       "modelled, and stay marked unreliable"}.get(
+            lin.values.get("modelled"), "the coefficients are unreliable")
+        return Adequacy(False, "model NOT adequate: the loop is not linear (see the "
+                        f"linearity check); {how}. Record again with a smaller excitation, "
+                        "keeping the currents below the amplifier limit and the probes "
+                        "inside their range.", failed=checks.failed, nonlinear=True)
     if checks.failed:
         return Adequacy(False, "model NOT assessed: data check failed ("
                         + ", ".join(checks.failed) + "); no interval can be trusted until "
-                        "the record is fixed (see the checks)." + note,
-                        failed=checks.failed, suspected=suspected)
+                        "the record is fixed (see the checks).", failed=checks.failed)
     if exact:
         return Adequacy(True, f"model adequate: it reproduces the record to rounding level "
                         f"(residual {nrmse:.1e} of eps on every channel).")
@@ -90,38 +100,95 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None) -> Adeq
                         f"({loc.evidence.get('strength', 'detected')}); the intervals "
                         "cannot cover what the model leaves out. Run `bayes-amb diagnose` "
                         "to locate and name it, or excite the bands it sits in "
-                        "differently." + note,
-                        channels=list(loc.channels), bands_hz=list(loc.bands_hz),
-                        suspected=suspected)
+                        "differently.",
+                        channels=list(loc.channels), bands_hz=list(loc.bands_hz))
     return Adequacy(True, "model adequate: no data check failed and the location tests "
-                    "find nothing the model leaves in the residual." + note,
-                    suspected=suspected)
+                    "find nothing the model leaves in the residual.")
 
 
 def nominal_assessment(recording: Recording, names: tuple[str, ...],
                        priors: dict[str, Prior] | None = None, seed: int = 0
                        ) -> tuple[DataChecks, FittedModel, np.ndarray]:
-    """Data checks (with linearity), eps and the nominal fit: the start of a diagnosis."""
+    """Data checks (with linearity), eps and the nominal fit: the start of a diagnosis.
+
+    A clipping amplifier (linearity.py) is modelled, not absorbed: the plant received the
+    current plus a defect d that enters the loop where r2 does, so eps - T_r2(theta) d is
+    linear in the model again and the nominal fit is redone on it (twice, T_r2 at the
+    previous fit). d is clip(u) - u at the estimated limit when the DAQ recorded the
+    command, or, when it recorded the clipped coil current (flat tops in u_*), the
+    documented controller's output on the held samples minus the recorded current there
+    (eps is then formed from the controller's output)."""
     fwd = ForwardModel(recording, names)
     checks = run_checks(recording, loop_poles(fwd))
     eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
     nominal = fit_nominal(recording, names, eps, priors, seed=seed, start=checks.start)
-    if np.isfinite(nominal.log_post):
-        checks = replace(checks, checks=(*checks.checks, linearity_check(
-            recording, nominal.like, nominal.params, checks.u)))
+    if not np.isfinite(nominal.log_post):
+        return checks, nominal, eps
+    d = _coil_defect(recording, checks)
+    clip = None
+    if d is not None:
+        eps = dual_youla_eps(fwd.parts, checks.y, checks.u - d)     # the commanded current
+    else:
+        clip = clipping(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
+        d = (clip_defect(checks.u, clip.limit_a, np.array(clip.centre_a)) if clip.found
+             else None)
+    if d is not None:
+        corrected = eps
+        for _ in range(2):                           # T_r2 at the previous fit
+            corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
+            refit = fit_nominal(recording, names, corrected, priors, seed=seed,
+                                start=checks.start)
+            if not np.isfinite(refit.log_post):
+                break
+            nominal = refit
+        eps = corrected
+    modelled = None if d is None else ("command" if clip is not None else "coil")
+    checks = replace(checks, checks=(*checks.checks,
+                                     linearity_check(recording, clip, modelled)))
     return checks, nominal, eps
+
+
+def _coil_defect(recording: Recording, checks: DataChecks) -> np.ndarray | None:
+    """The clip defect of a recorded coil current held at its extremes (flat tops in u_*):
+    recorded minus commanded current on the held samples, zero elsewhere; None when no u
+    channel is held or the controller check failed (the command is then not known)."""
+    held = [c for g, c, _ in flat_top_channels(recording) if g == "u"]
+    if not held or "controller" in checks.failed:
+        return None
+    u_rec = np.asarray(recording.u, dtype=float)
+    command = recompute_u(recording)
+    d = np.zeros_like(u_rec)
+    for c in held:
+        x = u_rec[:, c]
+        tol = 1e-9 * float(np.ptp(x))
+        at = (x >= x.max() - tol) | (x <= x.min() + tol)
+        d[at, c] = (u_rec - command)[at, c]
+    return d
 
 
 def assess(recording: Recording, names: tuple[str, ...],
            priors: dict[str, Prior] | None = None, seed: int = 0) -> Adequacy:
     """Adequacy of the model with the named parameters free for one recording."""
+    return assess_fit(recording, names, priors, seed)[0]
+
+
+def assess_fit(recording: Recording, names: tuple[str, ...],
+               priors: dict[str, Prior] | None = None, seed: int = 0
+               ) -> tuple[Adequacy, FittedModel]:
+    """Adequacy and the nominal fit it judged; when the model is not adequate, the fit
+    carries its model error (model_error.py), so that its draws (fitstats.draws) are the
+    posterior with the discrepancy integrated out."""
     checks, nominal, eps = nominal_assessment(recording, names, priors, seed)
     if not np.isfinite(nominal.log_post):
         return Adequacy(False, "model NOT adequate: no parameter value in the prior gives a "
-                        "finite likelihood", failed=["fit"])
+                        "finite likelihood", failed=["fit"]), nominal
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=seed))
-    return judge(checks, loc, worst_nrmse(nominal, eps))
+    verdict = judge(checks, loc, worst_nrmse(nominal, eps))
+    if not verdict.adequate:
+        nominal.model_error = model_error(nominal.like, nominal.x, nominal.p, nominal.cov,
+                                          nominal.names)
+    return verdict, nominal
 
 
 def worst_nrmse(fm: FittedModel, eps: np.ndarray) -> float:

@@ -42,9 +42,13 @@ def hdi(values: NDArray, prob: float = 0.9) -> list[float]:
     return [float(v[i]), float(v[i + k])]
 
 
+PINNED = 0.5
+"""A parameter with more than this share of its draws at a prior bound is pinned there."""
+
+
 def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
     """Posterior draws of the parameters (n, p): emcee samples if present, else Laplace
-    draws clipped to the prior support (dimensions without covariance stay at the MAP).
+    draws clipped to the prior support (without a covariance: uniform over the prior).
 
     When the model's error has been assessed (``fitted.model_error``, model_error.py) the
     draws are those of the posterior with the band-wise discrepancy integrated out: the
@@ -61,13 +65,26 @@ def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
     else:
         rng = np.random.default_rng(seed)
         if fitted.cov is None:
-            return np.tile(fitted.params, (n, 1))
+            # no usable curvature (a coefficient at its prior bound, a record that does not
+            # inform it): the data allow the prior, never a zero-width interval
+            d = np.tile(fitted.params, (n, 1)).astype(float)
+            for j, (lo, hi) in enumerate(bounds):
+                if lo is not None and hi is not None:
+                    d[:, j] = rng.uniform(lo, hi, n)
+            return d
         mean, cov = fitted.params, fitted.cov[:p, :p]
         if me is not None:
             mean, cov = mean + me.shift, me.cov[:p, :p]
         d = rng.multivariate_normal(mean, cov, size=n, method="eigh")
+    rng = np.random.default_rng(seed + 1)
     for j, (lo, hi) in enumerate(bounds):
         d[:, j] = np.clip(d[:, j], -np.inf if lo is None else lo, np.inf if hi is None else hi)
+        pinned = max(np.mean(d[:, j] == lo), np.mean(d[:, j] == hi))
+        if pinned > PINNED and lo is not None and hi is not None:
+            # the data push it beyond its prior (a model that lacks something): an interval
+            # of zero width at the bound would claim a precision nobody has; the data allow
+            # the prior
+            d[:, j] = rng.uniform(lo, hi, d.shape[0])
     return d
 
 

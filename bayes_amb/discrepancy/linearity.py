@@ -4,37 +4,38 @@ Every model here is linear. A loop that is not (an amplifier at its current limi
 sensor at the end of its range) bends the estimates of a linear model without a word, and
 the greedy search would explain the bend with some linear physics (a gain, a stiffness).
 So a nonlinearity is looked for first and reported as a failed ``linearity`` check: the
-diagnosis then names no physics, and the coefficients are marked unreliable.
+diagnosis then names no physics, and the coefficients are marked as estimated with the
+nonlinearity modelled (or unreliable where it cannot be).
 
 flat tops   A recorded current or displacement that sits at its extreme value on many
             samples (a clipped coil current, a probe at the end of its range): continuous
             signals with noise reach their maximum once.
 clipping    An amplifier that clips a commanded current the DAQ records unclipped leaves
-            no flat top. Its trace is in the residual of the fitted linear model: the
-            plant received clip(u), so the residual follows d = clip(u, +-c) - u. For a
-            threshold c at the 99th, 97th and 95th percentile of |u| per channel, the
-            residual DFT and the DFT of d are both freed of their least-squares fit on the
-            DFTs of u and the excitation within narrow bands (Frisch-Waugh), then the
-            residual is regressed on d within wide bands; this partial F-test of d
-            beyond the two linear regressors has no
-            power under a linear loop with Gaussian signals (Bussgang: the part of d not
-            linear in u is uncorrelated with every signal jointly Gaussian with u), and
-            all of it where the loop clips. The excitation is a regressor because a
-            linear model error leaves a residual linear in it, which a non-Gaussian
-            (binary) excitation would otherwise carry into d. Per-band
-            p-values are combined per channel (Fisher), Bonferroni over channels and
-            thresholds. The narrow bands (BAND_BINS bins) let linear physics the model lacks
-            (a smooth transfer function) be taken up by the linear regressors; the wide
-            ones give d's own (smooth) path through the loop the bins to be seen in.
+            no flat top. The plant received clip(u) = u + d, d = clip(u, c +- L) - u, and
+            d enters the loop where r2 does: the residual of the fitted linear model then
+            contains T_r2(theta) d, with T_r2 the model's own r2 -> eps filter and a gain
+            of exactly one. This is a known shape, one real coefficient beta per limit L:
+            the whitened residual DFT is regressed on the whitened DFT of T_r2 d together
+            with the Jacobian of the residual in the parameters (so the coefficients may
+            move to take what they can), with band-wise residual variances (a linear
+            misfit in some band inflates that band's variance instead of faking a clip).
+            For L over a grid of quantiles of |u - median| (pooled over the channels, one
+            amplifier type), clipping is found when beta's z exceeds the Bonferroni
+            threshold over the grid and beta reaches one (0.5 .. 2) somewhere on it: the
+            limit is where beta = 1. Linear physics outside the library (a pedestal, a gas
+            seal, a lag) gives beta ~ 0 +- 0.05; a clipping amplifier beta = 1 at the limit.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 from numpy.typing import NDArray
-from scipy import stats
+from scipy import optimize, stats
 from scipy.signal import lfilter
 
+from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.discrepancy.checks import Check
 from bayes_amb.discrepancy.locate import locate_bands
 from bayes_amb.io.recording import Recording
@@ -44,22 +45,50 @@ FLAT_SHARE = 1e-3
 """A channel is clipped when at least this share of its samples (and 5) sit at one of its
 two extremes."""
 
-QUANTILES = (0.99, 0.97, 0.95)
-
-BAND_BINS = 48
-"""Bins per regression band: narrow, so that a linear model error (a smooth transfer
-function) is nearly constant across a band and fully taken by the linear regressors."""
+QUANTILES = (0.999, 0.997, 0.995, 0.99, 0.985, 0.98, 0.97, 0.96, 0.95, 0.93, 0.9)
+"""Candidate limits: these quantiles of |u - median| (0.1 .. 10 % of the samples clip)."""
 ALPHA = 1e-4
-"""Family-wise level of the clipping test (over channels and thresholds)."""
+"""Family-wise level of the clipping test (over the candidate limits)."""
+GAIN_RANGE = (0.5, 2.0)
+"""beta must reach 1 within this range: the clip's path through the loop is known."""
+JAC_STEP = 1e-4
+
+
+@dataclass(frozen=True)
+class Clipping:
+    """The clipping regression's result: found, the largest z of beta over the grid, the
+    limit L (A, about each channel's median) where beta = 1 with the clipped share there,
+    and beta, its sd at the z-maximising limit."""
+
+    found: bool
+    z: float
+    limit_a: float
+    share: float
+    beta: float
+    beta_sd: float
+    centre_a: tuple[float, ...] = ()
+
+    def to_dict(self) -> dict[str, float | bool]:
+        return {"clipping_found": self.found, "clipping_z": self.z,
+                "clipping_limit_a": self.limit_a if self.found else None,
+                "clipped_share": self.share if self.found else None,
+                "clipping_gain": self.beta, "clipping_gain_sd": self.beta_sd,
+                "clipping_centre_a": list(self.centre_a) if self.found else None}
 
 
 def flat_tops(rec: Recording) -> list[str]:
     """Channels (y_*, u_*) whose extremes are held on many samples, with the share."""
+    return [f"{g}_{CHANNELS[c]} held at its extreme on {100 * s:.2g} % of the samples"
+            for g, c, s in flat_top_channels(rec)]
+
+
+def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
+    """(group 'u' or 'y', channel index, share) of every channel held at an extreme."""
     found = []
     for g, v in (("u", rec.u), ("y", rec.y)):
         v = np.asarray(v, dtype=float)
         n = v.shape[0]
-        for c, ch in enumerate(CHANNELS):
+        for c in range(len(CHANNELS)):
             x = v[:, c]
             span = float(np.ptp(x))
             if span <= 0:
@@ -67,105 +96,171 @@ def flat_tops(rec: Recording) -> list[str]:
             tol = 1e-9 * span
             share = max(np.sum(x >= x.max() - tol), np.sum(x <= x.min() + tol)) / n
             if share >= FLAT_SHARE and share * n >= 5:
-                found.append(f"{g}_{ch} held at its extreme on {100 * share:.2g} % of the "
-                             "samples")
+                found.append((g, c, float(share)))
     return found
 
 
-def _residualise(A: NDArray, Z: NDArray, bands: list[NDArray]) -> NDArray:
-    """A with its least-squares fit on Z removed within each band (A, Z: (nf, .))."""
-    out = A.copy()
-    for idx in bands:
-        Q, _ = np.linalg.qr(Z[idx])
-        out[idx] = A[idx] - Q @ (Q.conj().T @ A[idx])
+def clip_defect(u: NDArray, limit: float, centre: NDArray | None = None) -> NDArray:
+    """d = clip(u, centre +- limit) - u per channel, (N, 4); centre (4,) defaults to the
+    median (an amplifier offset moves the true centre away from it)."""
+    dev = u - (np.median(u, axis=0) if centre is None else np.asarray(centre))
+    return np.clip(dev, -limit, limit) - dev
+
+
+def r2_response(forward, theta: NDArray, d: NDArray) -> NDArray:
+    """The model's eps response (N, 4) from rest to a current d (N, 4) added at the plant
+    input, as r2 is (the noise system's r2 port at theta)."""
+    A, B, C, D = forward.noise_system(np.asarray(theta, dtype=float))
+    B2, D2 = B[:, 8:12], np.asarray(D)[:, 8:12]
+    drive = d @ B2.T
+    xs = np.zeros(A.shape[0])
+    out = d @ D2.T
+    for k in range(d.shape[0]):
+        out[k] += C @ xs
+        xs = A @ xs + drive[k]
     return out
 
 
-def _partial_p(R: NDArray, D: NDArray, wide: list[NDArray], keep: float) -> NDArray:
-    """Per wide band and channel the F-test p-value of R on D (both residualised on the
-    linear regressors; ``keep`` the share of degrees of freedom they left)."""
-    m = D.shape[1]
-    p = np.ones((len(wide), R.shape[1]))
-    for i, idx in enumerate(wide):
-        dof = keep * idx.size - m
-        if dof < 4:
-            continue
-        X = D[idx]
-        for c in range(R.shape[1]):
-            r = R[idx, c]
-            ss0 = float(np.sum(np.abs(r) ** 2))
-            ss1 = float(np.sum(np.abs(r - X @ np.linalg.lstsq(X, r, rcond=None)[0]) ** 2))
-            if ss1 <= 0:
-                continue
-            p[i, c] = stats.f.sf(((ss0 - ss1) / m) / (ss1 / dof), 2 * m, 2 * dof)
-    return p
+class _Regression:
+    """The whitened residual DFT of a fitted model, its Jacobian, its r2 -> eps filter and
+    the band grouping, shared by the clipping test and the limit's estimate."""
+
+    def __init__(self, like, params: NDArray, log10_sigma: NDArray, u: NDArray):
+        theta = np.asarray(params, dtype=float)
+        self.like, self.start = like, getattr(like, "start", 0)
+        p = theta.size
+        rows = like.residual_dft(np.vstack([theta, theta + JAC_STEP * np.eye(p)]))[0]
+        J = (rows[1:] - rows[0][None]) / JAC_STEP                     # (p, nf, 4)
+        self.H = ss_freqresp_modal(*like.forward.noise_system(theta),
+                                   like.z)[:, :, 8:12] / like.scale
+        chol = np.linalg.cholesky(like.curvature_weights(theta, log10_sigma))  # W = L L^H
+        self.LH = np.conj(np.swapaxes(chol, 1, 2))[np.repeat(np.arange(like.starts.size),
+                                                              like.counts)]
+        self.y = self.rows(rows[0])
+        self.J = self.rows(np.moveaxis(J, 0, -1))                      # (rows, p)
+        band = np.empty(like.k.size, dtype=int)
+        wide = locate_bands(like.k, like.n, like.forward.dt, 12, 192)
+        for i, idx in enumerate(wide):
+            band[idx] = i
+        self.n_groups = len(wide)
+        self.group = np.tile(np.repeat(band, 4), 2)
+        self.u = np.asarray(u, dtype=float)
+        self.pooled = np.abs(self.u - np.median(self.u, axis=0)).ravel()
+
+    def rows(self, V: NDArray) -> NDArray:
+        """Whitened bins, real and imaginary parts stacked as regression rows."""
+        w = np.einsum("kij,kj...->ki...", self.LH, V)
+        return np.concatenate([w.real.reshape(-1, *V.shape[2:]),
+                               w.imag.reshape(-1, *V.shape[2:])])
+
+    def z_rows(self, limit: float, centre: NDArray | None = None) -> NDArray:
+        """Regression rows of T_r2 d for the clip defect at this limit and centre."""
+        w = lfilter(self.like.prefilter, [1.0], clip_defect(self.u, limit, centre), axis=0)
+        D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
+        return self.rows(np.einsum("kij,kj->ki", self.H, D))
+
+    def band_weights(self, X: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
+        """Least squares of y on X with band-wise residual variances (two passes):
+        coefficients and row weights."""
+        wt = np.ones_like(y)
+        for _ in range(2):
+            b = np.linalg.lstsq(X * wt[:, None], y * wt, rcond=None)[0]
+            s2 = np.bincount(self.group, (y - X @ b) ** 2, minlength=self.n_groups) / \
+                np.maximum(np.bincount(self.group, minlength=self.n_groups), 1)
+            wt = 1.0 / np.sqrt(np.maximum(s2[self.group], 1e-300))
+        return b, wt
+
+    def gain(self, limit: float) -> tuple[float, float, NDArray]:
+        """beta, its sd and the row weights at one limit."""
+        X = np.column_stack([self.z_rows(limit), self.J])
+        b, wt = self.band_weights(X, self.y)
+        Xw = X * wt[:, None]
+        return float(b[0]), float(np.sqrt(np.linalg.pinv(Xw.T @ Xw)[0, 0])), wt
+
+    def profile(self, lo: float, hi: float, wt: NDArray, centre: NDArray | None = None
+                ) -> tuple[float, NDArray]:
+        """The limit in [lo, hi] and the centre per channel that best explain the residual
+        with the gain fixed at one: least residual sum of squares with the coefficients
+        free (their Jacobian projected out) and fixed band weights. The limit first on a
+        grid at the given centres (default: the medians), then both by Nelder-Mead."""
+        Q, _ = np.linalg.qr(self.J * wt[:, None])
+
+        def rss(limit: float, c: NDArray) -> float:
+            r = (self.y - self.z_rows(limit, c)) * wt
+            return float(np.sum((r - Q @ (Q.T @ r)) ** 2))
+
+        c = np.median(self.u, axis=0) if centre is None else np.array(centre, dtype=float)
+        limit = _argmin_1d(lambda v: rss(v, c), np.linspace(lo, hi, 41))
+        # then limit and centres together (the centres move the clipped share of each
+        # channel's two sides; coordinate steps stall in that valley)
+        x0 = np.concatenate([[limit], c]) / lo
+        res = optimize.minimize(lambda x: rss(x[0] * lo, x[1:] * lo), x0,
+                                method="Nelder-Mead",
+                                options={"xatol": 1e-3, "fatol": 1e-3 * rss(limit, c) / 1e4,
+                                         "maxfev": 600, "initial_simplex": np.vstack(
+                                             [x0, x0 + 0.05 * np.eye(x0.size)])})
+        x = res.x * lo
+        return float(np.clip(x[0], lo, hi)), x[1:]
 
 
-def clipping(like, params: NDArray, u: NDArray) -> tuple[bool, float, float, list[str]]:
-    """The clipping test on a fitted model's residual (module docstring).
-
-    like: the model's likelihood (its residual DFT, prefilter, window and bins); u (N, 4)
-    the recorded currents as they entered eps. Returns (found, p_adjusted, threshold in A
-    of the strongest, channels)."""
-    R = like.residual_dft(np.atleast_2d(params))[0][0]                  # (nf, 4)
-    start = getattr(like, "start", 0)
-
-    def dft(sig: NDArray) -> NDArray:
-        w = lfilter(like.prefilter, [1.0], sig, axis=0)[start:]
-        return np.fft.rfft(w, axis=0)[like.k]
-
-    u = np.asarray(u, dtype=float)
-    U = np.hstack([dft(u - u.mean(axis=0)), like.X])        # linear in u and in the excitation
-    nf = like.k.size
-    narrow = np.array_split(np.arange(nf), max(1, nf // BAND_BINS))
-    wide = locate_bands(like.k, like.n, like.forward.dt, 12, 4 * BAND_BINS)
-    keep = 1.0 - U.shape[1] / BAND_BINS
-    Rr = _residualise(R, U, narrow)
-    best = (1.0, 0.0, [])
-    tests = 0
-    dev = u - np.median(u, axis=0)                          # about the record's centre
-    for q in QUANTILES:
-        thr = np.quantile(np.abs(dev), q, axis=0)
-        d = np.clip(dev, -thr, thr) - dev
-        D = _residualise(dft(d), U, narrow)
-        p = _partial_p(Rr, D, wide, keep)
-        fisher = -2 * np.sum(np.log(np.maximum(p, 1e-300)), axis=0)
-        pc = stats.chi2.sf(fisher, 2 * p.shape[0])
-        tests += pc.size
-        j = int(np.argmin(pc))
-        if pc[j] < best[0]:
-            best = (float(pc[j]), float(thr[j]),
-                    [ch for ch, v in zip(CHANNELS, pc, strict=True) if v < ALPHA / 12])
-    p_adj = min(1.0, best[0] * tests)
-    return p_adj < ALPHA, p_adj, best[1], best[2]
+def _argmin_1d(f, grid: NDArray) -> float:
+    """The minimiser of f over a uniform grid, refined by a parabola through the best."""
+    vals = [f(v) for v in grid]
+    j = int(np.argmin(vals))
+    if 0 < j < grid.size - 1:
+        a, b, c = vals[j - 1], vals[j], vals[j + 1]
+        den = a - 2 * b + c
+        if den > 0:
+            return float(grid[j] + 0.5 * (a - c) / den * (grid[1] - grid[0]))
+    return float(grid[j])
 
 
-def linearity_check(rec: Recording, like=None, params: NDArray | None = None,
-                    u: NDArray | None = None) -> Check:
-    """The ``linearity`` data check: flat tops in the record fail it; the clipping test on a
-    fitted linear model's residual (given ``like`` and ``params``) is reported beside it as
-    a suspicion, not a failure: on the foreign benchmark's linear physics outside the
-    library (a pedestal resonance, a seal) its regression still found a partial
-    correlation (p 1e-11 .. 1e-15), so alone it cannot tell a clipping amplifier from a
-    linear mismatch."""
+def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clipping:
+    """The clipping regression on a fitted model's residual (module docstring).
+
+    like: the model's likelihood (residual DFT, prefilter, window, bins, noise spectrum);
+    params, log10_sigma: its fit; u (N, 4) the recorded currents as they entered eps."""
+    reg = _Regression(like, params, log10_sigma, u)
+    limits = np.quantile(reg.pooled, QUANTILES)
+    fits = [reg.gain(limit) for limit in limits]
+    beta = np.array([f[0] for f in fits])
+    sd = np.array([f[1] for f in fits])
+    z = beta / sd
+    j = int(np.argmax(z))
+    z_crit = stats.norm.isf(ALPHA / len(limits))
+    found = bool(z[j] > z_crit and beta.max() >= GAIN_RANGE[0]
+                 and np.any(beta <= GAIN_RANGE[1]))
+    limit, centre = float(limits[j]), np.median(reg.u, axis=0)
+    if found:
+        limit, centre = reg.profile(float(limits[-1]), float(limits[0]), fits[j][2])
+    share = float(np.mean(clip_defect(reg.u, limit, centre) != 0))
+    return Clipping(found, float(z[j]), limit, share, float(beta[j]), float(sd[j]),
+                    tuple(float(v) for v in centre))
+
+
+def linearity_check(rec: Recording, clip: Clipping | None = None,
+                    modelled: str | None = None) -> Check:
+    """The ``linearity`` data check: it fails on flat tops in the record, or when the
+    clipping regression (given as ``clip``) finds a clipped current in the residual.
+    modelled: how the fit took the nonlinearity in ('command': clip(u) at the estimated
+    limit; 'coil': the documented controller's command on the held samples), or None."""
     flats = flat_tops(rec)
-    found_clip, p_adj, thr, chans = (False, 1.0, 0.0, [])
-    if like is not None and params is not None:
-        found_clip, p_adj, thr, chans = clipping(like, params,
-                                                 rec.u if u is None else u)
-    values = {"flat_tops": flats, "clipping_p": p_adj, "clipping_suspected": found_clip,
-              "clipping_channels": chans,
-              "clipping_threshold_a": thr if found_clip else None}
-    suspicion = (f"; the residual follows the current clipped at about {thr:.3g} A from the "
-                 f"record's centre on {','.join(chans) or 'some channel'} (p {p_adj:.1e}): "
-                 "an amplifier current limit is possible (or linear physics the model "
-                 "lacks)" if found_clip else "")
-    if not flats:
-        return Check("linearity", True, "linearity: no flat tops in u or y" + (
-            suspicion or f", and the residual does not follow a clipped current (p "
-                         f"{p_adj:.2g})"), values)
+    values: dict = {"flat_tops": flats, **(clip.to_dict() if clip is not None else {}),
+                    "modelled": modelled}
+    problems = list(flats)
+    if clip is not None and clip.found:
+        problems.append(
+            f"the residual follows the recorded current clipped at {clip.limit_a:.3g} A "
+            f"about its centre ({100 * clip.share:.2g} % of the samples beyond it): gain "
+            f"{clip.beta:.2f} +- {clip.beta_sd:.2f} through the model's own loop, where a "
+            f"clipping amplifier gives 1 (z {clip.z:.0f})")
+    if not problems:
+        tail = (f", and the residual does not follow a clipped current (z {clip.z:.1f})"
+                if clip is not None else "")
+        return Check("linearity", True, "linearity: no flat tops in u or y" + tail, values)
     return Check("linearity", False,
-                 "linearity: FAILED - " + "; ".join(flats) + suspicion + ". The loop is "
-                 "not linear here: a linear model bends its coefficients to it, so they are "
-                 "unreliable and no physics is named (keep the currents below the amplifier "
-                 "limit and the probes inside their range: a smaller excitation)", values)
+                 "linearity: FAILED - " + "; ".join(problems) + ". The loop is not linear "
+                 "here (an amplifier current limit or a probe at the end of its range): "
+                 "no physics is named, and the coefficients are estimated with the limit "
+                 "modelled where it can be (keep the currents below the amplifier limit "
+                 "and the probes inside their range: a smaller excitation)", values)

@@ -19,7 +19,9 @@ import numpy as np
 import xarray as xr
 
 from bayes_amb import __version__
-from bayes_amb.discrepancy.adequacy import assess
+from bayes_amb.discrepancy.adequacy import assess_fit
+from bayes_amb.discrepancy.fitstats import draws, theta_summary
+from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.estimate import LogPosterior, MapResult, find_map, laplace_covariance
 from bayes_amb.inference.forward import ForwardModel
@@ -100,6 +102,31 @@ def _absolute(source: str) -> str:
     return str(p.resolve()) if p.is_file() else source
 
 
+def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed: int
+                      ) -> None:
+    """When the model is not adequate (``nominal``: the adequacy's fit, carrying its model
+    error), the reported intervals are those of the posterior with the band-wise model
+    error integrated out (discrepancy/model_error.py), as diagnose reports them: an
+    interval that covers what the model misses, not one around a biased value. This
+    likelihood's own intervals stay under ``parameters_model_only``."""
+    if nominal is None:
+        return
+    own = summary["parameters"]
+    rig = nominal.forward.recording.rig
+    widened = theta_summary(nominal, draws(nominal, seed=seed))
+    summary["parameters_model_only"] = own
+    summary["parameters"] = {
+        n: {**own[n], "mean": w["mean"], "sd": w["sd"], "hdi90": w["hdi90"],
+            "physical_mean": w["physical_mean"],
+            "physical_sd": w["sd"] * abs(get_spec(n).physical_scale(rig)),
+            "physical_hdi90": w["physical_hdi90"]}
+        for n, w in widened.items() if n in own}
+    summary["parameters_from"] = ("the model is not adequate: intervals of the posterior "
+                                  "with the band-wise model error integrated out (see "
+                                  "adequacy); this model's own in parameters_model_only")
+    summary.pop("laplace_cov", None)     # the correlations of the model-only posterior
+
+
 def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | None,
                      rig: Any) -> dict[str, dict[str, Any]]:
     out = {}
@@ -162,8 +189,12 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         "n_bands": like.n_bands,
         "seed": opt.seed,
     }
+    nominal = None
     if opt.adequacy:
-        summary["adequacy"] = assess(recording, names, priors, seed=opt.seed).to_dict()
+        verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
+        summary["adequacy"] = verdict.to_dict()
+        if verdict.adequate:
+            nominal = None
     result = IdentificationResult(names=names, map=m, summary=summary, eps=eps, likelihood=like)
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"
@@ -173,6 +204,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
                 "names": list(names), "theta": np.asarray(cov)[:len(names),
                                                                :len(names)].tolist()}
         summary["converged"] = bool(m.success and cov is not None)
+        _with_model_error(summary, nominal, opt.seed)
         summary["wall_s"] = time.perf_counter() - t0
         return result
     rng = np.random.default_rng(opt.seed)
@@ -221,6 +253,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     summary["converged"] = bool(
         all(v["r_hat"] <= 1.01 and v["ess_bulk"] >= 400 for v in params_summary.values())
         and run.n_tau >= 50)
+    _with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
     result.posterior = dt
     result.samples = run.samples

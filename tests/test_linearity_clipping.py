@@ -1,0 +1,64 @@
+"""The linearity check on the foreign generator's amplifier current limit (issue 27).
+
+A clipping amplifier is a nonlinearity the tool must report, never absorb: the check
+fails, the limit it estimates is the generator's, and with the clip modelled the eight
+bearing coefficients come back inside their intervals. The same draws without the limit
+pass the check. The generator is tests/foreign (written apart from the tool); its truth is
+read only here, after the tool has answered."""
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from bayes_amb.discrepancy.adequacy import nominal_assessment
+from bayes_amb.discrepancy.library.bearing_coefficient import BEARING_COEFFICIENTS
+from bayes_amb.io.recording import load_recording
+from tests.foreign.cases import draw_case, write_case
+
+
+def _record(tmp_path, controller_file, recorded: str | None, seed: int = 31):
+    rng = np.random.default_rng(seed)
+    spec = draw_case("current_limit", rng, controller_file=controller_file, duration_s=1.0)
+    effect = spec.effects[0]
+    if recorded is None:
+        spec = replace(spec, effects=())
+    else:
+        spec = replace(spec, effects=(replace(effect, params={
+            **effect.params, "recorded": recorded, "clipped_share_target": 0.02}),))
+    paths = write_case(spec, tmp_path, f"clip_{recorded}", rng)
+    return load_recording(paths["csv"]), json.loads(paths["truth"].read_text())
+
+
+def _z(nominal, truth):
+    theta = np.array([truth["theta"][n] for n in BEARING_COEFFICIENTS])
+    sd = np.sqrt(np.diag(nominal.cov)[:8])
+    return (nominal.params - theta) / sd
+
+
+@pytest.mark.parametrize("recorded", ["command", "coil"])
+def test_a_clipping_amplifier_fails_the_check_and_is_modelled(tmp_path, controller_file,
+                                                              recorded):
+    rec, truth = _record(tmp_path, controller_file, recorded)
+    checks, nominal, _ = nominal_assessment(rec, BEARING_COEFFICIENTS)
+    lin = next(c for c in checks.checks if c.name == "linearity")
+    assert not lin.ok and "FAILED" in lin.line
+    i_max = truth["effects"][0]["params"]["i_max_a"]
+    if recorded == "command":       # no flat top: found in the residual, limit estimated
+        assert not lin.values["flat_tops"]
+        assert abs(lin.values["clipping_limit_a"] / i_max - 1) < 0.03
+        assert 0.5 < lin.values["clipping_gain"] < 2.0
+    else:
+        assert lin.values["flat_tops"]
+    # with the clip modelled the coefficients are honest again: 8 z-scores of a correct
+    # model exceed 4 in absolute value with probability 5e-4
+    assert np.max(np.abs(_z(nominal, truth))) < 4.0
+
+
+def test_the_same_draws_without_a_limit_pass(tmp_path, controller_file):
+    rec, _ = _record(tmp_path, controller_file, None)
+    checks, _, _ = nominal_assessment(rec, BEARING_COEFFICIENTS)
+    lin = next(c for c in checks.checks if c.name == "linearity")
+    assert lin.ok, lin.line
+    assert lin.values["clipping_z"] < 4.0
