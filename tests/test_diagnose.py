@@ -79,7 +79,7 @@ def test_effect_free_recording_raises_no_alarm(control):
     assert r["summary"].startswith("No mismatch")
     assert [(c["check"], c["ok"]) for c in r["checks"]] == [
         ("excitation", True), ("controller", True), ("start", True), ("offsets", True),
-        ("linearity", True)]
+        ("linearity", True), ("information", True)]
     assert r["adequacy"]["adequate"] and r["adequacy"]["line"].startswith("model adequate")
     # the model error never narrows a posterior
     assert all(v >= 1 - 1e-9 for v in r["model_error"]["before"]["sd_ratio"].values())
