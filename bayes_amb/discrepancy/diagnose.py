@@ -229,6 +229,12 @@ def _running_speed(nominal: FittedModel, loc: Location, residual: np.ndarray
                     f"{written:g} rpm written in the record); synchronous candidates use it"}
 
 
+NOMINAL_ADVICE = ("This diagnosis locates it and names what it can (verdict, explanations, "
+                  "unexplained).")
+FINAL_ADVICE = ("The library has no further explanation (see unexplained): read the "
+                "corrected estimates as partly explained.")
+
+
 def _check_locations(candidates: tuple[Candidate, ...], recording: Recording) -> None:
     """Refuse, before any fitting, a candidate at a shaft node or disc the recording's rig
     does not have (one line naming the candidate and the rig's range)."""
@@ -328,7 +334,10 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                                      "compared (start-up transient of a record that does "
                                      "not start at rest, or of removed offsets)"},
         "verdict": _verdict(checks, loc, sel.accepted, unexplained),
-        "adequacy": judge(checks, loc, max(before["nrmse"].values())).to_dict(),
+        "adequacy": judge(checks, loc, max(before["nrmse"].values()),
+                          advice=NOMINAL_ADVICE).to_dict(),
+        "adequacy_after": judge(checks, final_loc, max(after["nrmse"].values()),
+                                advice=FINAL_ADVICE).to_dict(),
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,
