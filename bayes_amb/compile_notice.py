@@ -20,7 +20,7 @@ __all__ = ["MESSAGE", "install"]
 
 MESSAGE = "bayes-amb: compiling kernels once (about 30 s; cached for later runs) ..."
 
-_state: dict[str, Any] = {"listener": None, "said": False}
+_state: dict[str, Any] = {"listener": None}
 
 
 def _ours(event: Any) -> bool:
@@ -40,10 +40,13 @@ def install(stream: TextIO | None = None) -> bool:
         return False
 
     class _Notice(event.Listener):
+        def __init__(self) -> None:
+            self.said = False
+
         def on_start(self, ev: Any) -> None:
-            if _state["said"] or not _ours(ev) or multiprocessing.parent_process() is not None:
+            if self.said or not _ours(ev) or multiprocessing.parent_process() is not None:
                 return
-            _state["said"] = True
+            self.said = True
             out = stream or sys.stderr
             out.write(MESSAGE + "\n")
             out.flush()

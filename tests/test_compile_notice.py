@@ -16,12 +16,18 @@ from bayes_amb import compile_notice
 
 @pytest.fixture
 def notice(monkeypatch):
-    """A fresh notice writing to a buffer, unregistered afterwards."""
-    monkeypatch.setattr(compile_notice, "_state", {"listener": None, "said": False})
+    """A fresh notice writing to a buffer; the one an earlier CLI call in this process
+    installed is set aside meanwhile."""
+    old = compile_notice._state["listener"]
+    if old is not None:
+        event.unregister("numba:compile", old)
+    monkeypatch.setattr(compile_notice, "_state", {"listener": None})
     buf = io.StringIO()
     assert compile_notice.install(buf)
     yield buf
     event.unregister("numba:compile", compile_notice._state["listener"])
+    if old is not None:
+        event.register("numba:compile", old)
 
 
 def _fake_compile(module: str) -> None:
