@@ -19,11 +19,12 @@ from typing import Any
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.pid import PIDSettings, continuous_pid, pid_gains
 from bayes_amb.inference.identify import IdentifyOptions, identify
-from bayes_amb.io.atomic import write_json_atomic
+from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.channel_map import map_to_toml
 from bayes_amb.io.controller_import import import_controller
 from bayes_amb.io.daq_export import export_daq, realistic_channel_map, write_mat
 from bayes_amb.io.daq_import import import_recording
+from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import save_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
@@ -92,6 +93,6 @@ def run_import_demo(out_dir: str | Path, seed: int = 0) -> ImportDemoResult:
     wall = time.perf_counter() - t0
     summary = {"truth": TRUTH, "canonical": canonical, "formats": formats,
                "controller": controller, "wall_s": wall}
-    write_json_atomic(out / "import_demo.json", summary)
+    write_text_atomic(out / "import_demo.json", result_json_text(summary))
     return ImportDemoResult(formats=formats, canonical=canonical, controller=controller,
                             summary_path=out / "import_demo.json", wall_s=wall)

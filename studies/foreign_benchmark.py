@@ -37,7 +37,6 @@ OUT/summary.md (the per-case table and the targets) and OUT/summary.json.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 import zlib
@@ -50,6 +49,7 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import diagnose
 from bayes_amb.discrepancy.balancing import in_credible_ellipse
 from bayes_amb.io.atomic import json_text, write_text_atomic
+from bayes_amb.io.nonfinite import plain, read_result_json, result_json_line, result_json_text
 from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
 from tests.foreign import CaseSpec, Effect, draw_case, read_controller, write_case
@@ -259,7 +259,7 @@ def run_identify(csv: Path, path: Path) -> dict[str, Any]:
         res = identify(load_recording(csv), list(COEFFICIENTS),
                        options=IdentifyOptions(map_only=True))
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(path, json.dumps(res.summary, default=float) + "\n")
+        write_text_atomic(path, result_json_text(plain(res.summary, float)))
         error = None
     except Exception as exc:  # a benchmark row, not a crash
         error = f"{type(exc).__name__}: {exc}"
@@ -277,7 +277,7 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
     rows_path = out / "rows.jsonl"
     done = set()
     if rows_path.is_file():
-        done = {json.loads(line)["name"] for line in rows_path.read_text().splitlines()
+        done = {read_result_json(line)["name"] for line in rows_path.read_text().splitlines()
                 if line.strip()}
     ctrl = _controller_file(out, 1e-4)
     counts = counts or {}
@@ -297,18 +297,18 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
             error = None
         except Exception as exc:  # a benchmark row, not a crash: record and go on
             report, error = None, f"{type(exc).__name__}: {exc}"
-        truth = json.loads(Path(paths["truth"]).read_text())
+        truth = read_result_json(Path(paths["truth"]).read_text())
         row = {"name": name, "error": error, "seconds": time.perf_counter() - t0,
                "cpu_s": time.process_time() - c0}
         if report is not None:
             row.update(score(truth, report, ctrl))
             (out / "diagnoses").mkdir(exist_ok=True)
             write_text_atomic(out / "diagnoses" / f"{name}.json",
-                              json.dumps(report, default=float) + "\n")
+                              result_json_text(plain(report, float)))
         if identify:
             row["identify"] = run_identify(paths["csv"], out / "identify" / f"{name}.json")
         with rows_path.open("a") as fh:
-            fh.write(json.dumps(row, default=float) + "\n")
+            fh.write(result_json_line(plain(row, float)) + "\n")
         sys.stderr.write(f"{name}: {row.get('verdict')} named={row.get('named')} "
                          f"wrong={row.get('wrong_confident')} {row['seconds']:.0f} s\n")
     summarise(out)
@@ -321,12 +321,12 @@ def drop_rows(out: Path, names: set[str]) -> None:
     if not path.is_file():
         return
     keep = [line for line in path.read_text().splitlines()
-            if line.strip() and json.loads(line)["name"] not in names]
+            if line.strip() and read_result_json(line)["name"] not in names]
     write_text_atomic(path, "".join(line + "\n" for line in keep))
 
 
 def summarise(out: Path) -> dict[str, Any]:
-    rows = [json.loads(line) for line in (out / "rows.jsonl").read_text().splitlines()
+    rows = [read_result_json(line) for line in (out / "rows.jsonl").read_text().splitlines()
             if line.strip()]
     ok = [r for r in rows if r["error"] is None]
     singles = [r for r in ok if len(r["effects"]) == 1 and r["in_library"]]
@@ -382,7 +382,7 @@ def summarise(out: Path) -> dict[str, Any]:
     for k, v in s.items():
         lines.append(f"- {k}: {v[0]}/{v[1]}" if isinstance(v, tuple) else f"- {k}: {v}")
     write_text_atomic(out / "summary.md", "\n".join(lines) + "\n")
-    write_text_atomic(out / "summary.json", json.dumps(s, indent=1) + "\n")
+    write_text_atomic(out / "summary.json", result_json_text(plain(s, float)))
     coverage(out, [r["name"] for r in ok])
     return s
 
@@ -466,9 +466,9 @@ def coverage(out: Path, names: list[str]) -> dict[str, Any]:
             continue
 
         def load(p: Path) -> dict[str, Any] | None:
-            return json.loads(p.read_text()) if p.is_file() else None
+            return read_result_json(p.read_text()) if p.is_file() else None
 
-        recs.append(recording_coverage(name, json.loads(tpath.read_text()),
+        recs.append(recording_coverage(name, read_result_json(tpath.read_text()),
                                        load(out / "diagnoses" / f"{name}.json"),
                                        load(out / "identify" / f"{name}.json")))
     fams: dict[str, Any] = {}
@@ -489,7 +489,7 @@ def coverage(out: Path, names: list[str]) -> dict[str, Any]:
                 "adequacy_reported": sum(r["adequacy"] is not None for r in ri),
                 "inadequate": sum(r["adequate"] is False for r in ri)}
     result = {"format": "foreign-coverage/1", "families": fams, "recordings": recs}
-    write_text_atomic(out / "coverage.json", json.dumps(result, indent=1) + "\n")
+    write_text_atomic(out / "coverage.json", result_json_text(plain(result, float)))
 
     def frac(v: list[int]) -> str:
         return f"{v[0]}/{v[1]}"

@@ -96,7 +96,8 @@ def test_zoh_and_prewarp_are_stated_and_stabilise(tmp_path):
 
 @pytest.mark.parametrize("edit, match", [
     (lambda v: v.update(C=-v["C"], D=-v["D"]), r"does not stabilise rig 'reference' at 31500 "
-                                               r"rpm: closed-loop spectral radius"),
+                                               r"rpm: closed-loop spectral radius .*; least "
+                                               r"stable closed-loop pole at \d+ Hz"),
     (lambda v: v.update(Ts=2e-4), r"variable Ts: 0\.0002 s but the sample time is 0\.0001 s"),
     (lambda v: v.update(B=v["B"][:, :3]), r"variable B: expected shape \(8, 4\), got \(8, 3\)"),
     (lambda v: v.pop("Ts"), r"variable Ts: missing"),
@@ -158,3 +159,20 @@ def test_a_channel_map_can_name_the_matlab_controller(tmp_path, pid):
     with pytest.raises(DataImportError, match=r"field recording\.controller_method: applies "
                                               r"only to a controller given as a MATLAB"):
         import_recording(tmp_path / "daq.h5", tmp_path / "map.toml")
+
+
+def test_an_unstable_bending_mode_is_named(tmp_path):
+    """Issue 28: a ROSS shaft without material damping (first_mode_zeta 0) let the PID
+    destabilise a bending pair, and the refusal gave only the spectral radius. It now names
+    the least stable pole and the lightly damped open-loop mode beside it."""
+    from bayes_amb.rig import rig_from_dict
+
+    d = load_rig().to_dict()
+    d["damping"]["first_mode_zeta"] = 0.0
+    rig = rig_from_dict(d, source="undamped")
+    A, B, C, D = _matlab_pid_continuous()
+    write_mat(tmp_path / "K.mat", {"A": A, "B": B, "C": C, "D": D, "Ts": 0.0})
+    with pytest.raises(DataImportError, match=r"spectral radius 1\.00\d+ .*least stable "
+                       r"closed-loop pole at 310\d Hz .*next to the open-loop mode at 3095 Hz "
+                       r"\(damping ratio .*\): a bending mode the controller destabilises"):
+        import_controller(tmp_path / "K.mat", rig, dt=DT)

@@ -228,6 +228,25 @@ def test_summary_states_the_unexplained_part_in_words(bare, unexplained, shown):
         assert f"leaves part of the mismatch unexplained: {shown}" in text
 
 
+def test_summary_leads_with_the_final_models_adequacy(bare):
+    """After a diagnosis that named physics, the first bullet is the final model's adequacy
+    (the nominal one beside it), not the nominal line's "Run `bayes-amb diagnose`": the
+    engineer of issue 28 had just run it."""
+    from bayes_amb.report.render import summary_section
+
+    run = bare[0]
+    diagnosis = dict(run.diagnosis,
+                     adequacy={"adequate": False, "line": "model NOT adequate: nominal."},
+                     adequacy_after={"adequate": True, "line": "model adequate: final."})
+    sec = summary_section(dataclasses.replace(run, diagnosis=diagnosis), {})
+    assert sec.bullets[0] == ("Adequacy of the final model (after the diagnosis): model "
+                              "adequate: final. The nominal model: model NOT adequate: "
+                              "nominal.")
+    sec = summary_section(dataclasses.replace(run, diagnosis=dict(
+        diagnosis, explanations=[])), {})
+    assert sec.bullets[0] == "Adequacy of the model: model NOT adequate: nominal."
+
+
 def test_matplotlib_pdf_fallback(bare, tmp_path):
     _, sections, meta, _ = bare
     path = tmp_path / "fallback.pdf"

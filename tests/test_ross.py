@@ -41,9 +41,11 @@ def _rotor(odl=(0.06,) * 35, sensor_nodes=(4, 28), beta=0.0, **shaft_kw):
 def test_converted_rig_has_the_ross_eigenvalues(tmp_path, capsys):
     rotor = _rotor()
     rotor.save(tmp_path / "rotor.toml")
-    code, _, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"), "--speed-rpm",
-                            "24000", "--zeta", "0", "-o", str(tmp_path / "rig.toml")], capsys)
+    code, out, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"), "--speed-rpm",
+                              "24000", "--zeta", "0", "-o", str(tmp_path / "rig.toml")], capsys)
     assert code == 0, err
+    # a saved rotor comes back with plain BearingElements; the PID note survives that
+    assert "the ROSS bearings' controller (kp_pid" in out, out
     rig = load_rig(tmp_path / "rig.toml")
     assert (rig.n_nodes, rig.bearing_nodes, rig.sensor_nodes) == (36, {"A": 5, "B": 29},
                                                                   {"A": 5, "B": 29})

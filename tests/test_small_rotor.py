@@ -59,3 +59,42 @@ def test_simulate_identify_diagnose_end_to_end(rig_ctrl, tmp_path):
         assert abs(after[n]["mean"] - v) < 3 * after[n]["sd"], (n, after[n])
     assert np.isfinite(d.report["fit"]["log_likelihood_gain"])
     assert d.report["fit"]["log_likelihood_gain"] > 3
+
+
+def _short_rig(n_nodes=25):
+    """A rig with fewer shaft nodes than the reference rig's n27 (the ROSS rotor of issue 28:
+    25 nodes, bearings at 5 and 21)."""
+    from bayes_amb.rig import rig_from_dict
+
+    d = load_rig("small_rotor").to_dict()
+    d["shaft"]["n_nodes"] = n_nodes
+    d["discs"][0]["node"], d["discs"][1]["node"] = 2, n_nodes - 1
+    d["bearings"]["A"]["node"], d["bearings"]["B"]["node"] = 5, n_nodes - 4
+    d["sensors"]["A"]["node"], d["sensors"]["B"]["node"] = 4, n_nodes - 3
+    return rig_from_dict(d, source="short")
+
+
+def test_default_candidates_sit_on_the_rig():
+    """The default unbalance nodes were the reference rig's n14, n20, n27: on a 25-node rig
+    diagnose stopped after its nominal fit with 'node n27 out of range'. They are now the
+    rig's own quarter-span nodes between the bearings."""
+    from bayes_amb.rig import node_label
+
+    rig = _short_rig()
+    nodes = [node_label(c.location) for c in all_candidates(rig=rig)]
+    nodes = [n for n in nodes if n is not None]
+    assert nodes == [9, 13, 17]
+    assert all(rig.bearing_nodes["A"] < n < rig.bearing_nodes["B"] for n in nodes)
+
+
+def test_a_candidate_off_the_rig_is_refused_before_fitting(rig_ctrl):
+    from bayes_amb.discrepancy.library import make_candidate
+    from bayes_amb.errors import BayesAmbError
+
+    rig, ctrl = rig_ctrl
+    rec, _ = simulate_recording(rig, export_controller(ctrl, rig), SimulationConfig(
+        truth="reduced", dt=DT, duration=0.02, seed=1))
+    with pytest.raises(BayesAmbError, match=r"candidate unbalance@n40: rig 'small_rotor' .* "
+                                            r"has nodes n1 \.\. n36"):
+        diagnose(rec, "k_By", options=DiagnoseOptions(
+            candidates=(make_candidate("unbalance@n40"),)))

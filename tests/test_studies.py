@@ -377,6 +377,40 @@ def test_netcdf_and_manifest(finished):
     assert [p.name for p in pngs] == ["noise_rms_k_By.png"] and pngs[0].stat().st_size > 10_000
 
 
+def _strict(text: str):
+    """json.loads that refuses NaN/Infinity tokens (what any other JSON reader does)."""
+    def refuse(token):
+        raise ValueError(f"invalid JSON token {token}")
+    return json.loads(text, parse_constant=refuse)
+
+
+def test_non_finite_numbers_make_valid_json(finished, tmp_path):
+    """Issue 28: json.dumps wrote NaN/Infinity tokens into results.jsonl and study.json (a
+    failed replicate's sd, an undefined coverage). They are now null with a "non_finite"
+    list, every file parses as strict JSON, and read_rows gives the floats back."""
+    from bayes_amb.studies.runner import append_row
+
+    spec, out, rows = finished
+    bad = [dict(r) for r in rows]
+    bad[0]["k_By_sd"] = float("nan")
+    bad[1]["k_By_mean"] = np.float64("inf")
+    bad[2]["k_By_hdi_lo"] = -math.inf
+    shutil.copy(out / "study.json", tmp_path / "study.json")
+    for r in bad:
+        append_row(tmp_path / "results.jsonl", r)
+    lines = jsonl_lines(tmp_path / "results.jsonl")
+    parsed = [_strict(line) for line in lines]
+    assert parsed[0]["k_By_sd"] is None and parsed[0]["non_finite"] == {"/k_By_sd": "nan"}
+    back = read_rows(tmp_path / "results.jsonl")
+    assert math.isnan(back[0]["k_By_sd"]) and back[1]["k_By_mean"] == math.inf
+    assert back[2]["k_By_hdi_lo"] == -math.inf and "non_finite" not in back[0]
+    assert canon(back[3:]) == canon(rows[3:])
+    m = finalise(spec, back, tmp_path)
+    text = (tmp_path / "study.json").read_text(encoding="utf-8")
+    assert _strict(text)["n_rows"] == 6 and m["n_rows"] == 6
+    _strict((out / "study.json").read_text(encoding="utf-8"))
+
+
 # --- binomial intervals and SBC statistics ------------------------------------------------
 
 @pytest.mark.parametrize(("k", "n"), [(0, 10), (3, 10), (10, 10), (45, 50), (180, 200)])

@@ -11,7 +11,12 @@ from bayes_amb.cli.options import real
 from bayes_amb.control.coprime import bezout_residual, coprime_factors
 from bayes_amb.control.discrete import spectral_radius, zoh
 from bayes_amb.control.export import export_controller, reference_controller
-from bayes_amb.control.robustness import full_plant_discrete, loop_spectral_radius, sensitivity
+from bayes_amb.control.robustness import (
+    full_plant_discrete,
+    loop_spectral_radius,
+    sensitivity,
+    unstable_where,
+)
 from bayes_amb.control.youla import s_theta_exact
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rig import check_speed_rpm, load_rig
@@ -72,6 +77,8 @@ def controller_report(rig_path: str | None = None, dt: float = 1e-4,
         "iso14839_zone": sens.zone,
         "exported": export,
     }
+    if not rho_full < 1.0:
+        d["unstable_where"] = unstable_where(Ap, Bp, fm.C, K, fm.A, dt)
     if export:
         export_controller(ctrl, rig).save(export)
     return d
@@ -85,7 +92,7 @@ def format_report(d: dict) -> str:
         f"  design          : {d['design']['method']}",
         f"  full plant loop : {'stable' if d['closed_loop_stable_full'] else 'UNSTABLE'} "
         f"(spectral radius {d['spectral_radius_full']:.6f}, {d['full_states']}-state plant of "
-        f"rig '{d['rig']}')",
+        f"rig '{d['rig']}'{'; ' + d['unstable_where'] if d.get('unstable_where') else ''})",
         f"  sensitivity     : {peaks}  -> ISO 14839-3 zone {d['iso14839_zone']}",
         f"  Bezout residual : {d['bezout_residual']:.2e} (eq. 3, relative)",
         f"  S(theta) stable : {d['s_theta_stable']} over |theta| <= 0.5 on each k_*, c_* "

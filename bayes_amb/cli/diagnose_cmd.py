@@ -147,7 +147,7 @@ def run(args: argparse.Namespace) -> int:
             check_planes(rec.rig, planes)
         except BayesAmbError as exc:
             raise BayesAmbError(f"option --planes: {exc}") from None
-    cands = all_candidates(wanted)
+    cands = all_candidates(wanted, rig=rec.rig)
     cands += node_scan(scan, rec.rig.n_nodes, cands)
     quiet = args.no_progress or args.json
 

@@ -12,6 +12,7 @@ import re
 import sys
 
 from bayes_amb import __version__
+from bayes_amb.compile_notice import install as install_compile_notice
 from bayes_amb.errors import BayesAmbError, one_line
 from bayes_amb.threads import ENV_VAR as THREADS_ENV
 from bayes_amb.threads import configure_process
@@ -95,6 +96,7 @@ def main(argv: list[str] | None = None) -> int:
     if not getattr(args, "func", None):
         parser.print_help()
         return 2
+    install_compile_notice()                  # one line if the kernels are not compiled yet
     try:
         return int(args.func(args) or 0)
     except BayesAmbError as exc:

@@ -85,3 +85,25 @@ def full_plant_discrete(A_f: NDArray, B_f: NDArray, dt: float) -> tuple[NDArray,
 def loop_spectral_radius(Ap: NDArray, Bp: NDArray, Cp: NDArray, K: tuple[NDArray, ...]) -> float:
     """Largest |eigenvalue| of the discrete closed loop; stable iff < 1."""
     return spectral_radius(closed_loop_matrix(Ap, Bp, Cp, *K))
+
+
+def unstable_where(Ap: NDArray, Bp: NDArray, Cp: NDArray, K: tuple[NDArray, ...],
+                   A_cont: NDArray, dt: float) -> str:
+    """Where a discrete loop is unstable, in words: the frequency of its least stable pole
+    and, when the continuous plant ``A_cont`` has a lightly damped mode near it, that mode
+    (the usual cause: a bending mode the controller's phase destabilises)."""
+    z = np.linalg.eigvals(closed_loop_matrix(Ap, Bp, Cp, *K))
+    worst = z[np.argmax(np.abs(z))]
+    f = abs(np.angle(worst)) / (2 * np.pi * dt)
+    text = f"least stable closed-loop pole at {f:.0f} Hz (|z| = {abs(worst):.6g})"
+    lam = np.linalg.eigvals(A_cont)
+    lam = lam[(lam.imag > 0) & (np.abs(lam) > 0)]
+    if f > 0 and lam.size:
+        fo = np.abs(lam.imag) / (2 * np.pi)
+        k = int(np.argmin(np.abs(fo - f)))
+        zeta = -lam[k].real / abs(lam[k])
+        if abs(fo[k] - f) < 0.1 * f and zeta < 0.05:
+            text += (f", next to the open-loop mode at {fo[k]:.0f} Hz (damping ratio "
+                     f"{zeta:.2g}): a bending mode the controller destabilises; it needs "
+                     "roll-off or a notch there (the rig's damping is its first_mode_zeta)")
+    return text

@@ -70,9 +70,17 @@ ROUNDING = 1e-6
 is the arithmetic's, not a mismatch (a noise-free simulation fitted exactly)."""
 
 
-def judge(checks: DataChecks, loc: Location, nrmse: float | None = None) -> Adequacy:
+ADVICE = ("Run `bayes-amb diagnose` to locate and name it, or excite the bands it sits in "
+          "differently.")
+"""What an inadequate model's line tells the user to do (identify's; the diagnosis, which
+has done it, points at its own findings instead)."""
+
+
+def judge(checks: DataChecks, loc: Location, nrmse: float | None = None,
+          advice: str = ADVICE) -> Adequacy:
     """The adequacy verdict from the data checks and the location of a fitted model;
-    nrmse: the largest NRMSE of its residual over the channels, when known."""
+    nrmse: the largest NRMSE of its residual over the channels, when known; advice: the
+    last sentence of an inadequate model's line."""
     lin = next((c for c in checks.checks if c.name == "linearity"), None)
     exact = nrmse is not None and nrmse < ROUNDING
     nonlinear = lin is not None and not lin.ok
@@ -99,9 +107,7 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None) -> Adeq
                         f"{','.join(loc.channels) or 'the record'} in "
                         f"{_spans(loc.bands_hz) or 'the band'} "
                         f"({loc.evidence.get('strength', 'detected')}); the intervals "
-                        "cannot cover what the model leaves out. Run `bayes-amb diagnose` "
-                        "to locate and name it, or excite the bands it sits in "
-                        "differently.",
+                        f"cannot cover what the model leaves out. {advice}",
                         channels=list(loc.channels), bands_hz=list(loc.bands_hz))
     return Adequacy(True, "model adequate: no data check failed and the location tests "
                     "find nothing the model leaves in the residual.")

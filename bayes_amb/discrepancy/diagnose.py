@@ -62,7 +62,7 @@ from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
 from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording, require_excitation
-from bayes_amb.rig import CHANNELS
+from bayes_amb.rig import CHANNELS, node_label
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import parse_param_list
 
@@ -70,16 +70,17 @@ from bayes_amb.uncertainty import parse_param_list
 @dataclass
 class DiagnoseOptions:
     """log_bf_threshold and max_effects of the greedy search, the candidates tried (default
-    all), prescreen (route candidates by their fingerprint, prescreen.py; False screens
-    every one fully), sample (run emcee on the nominal and the final model; otherwise their
-    posteriors are Laplace approximations), steps per sampled model, seed, progress
-    callback(text), planes (the two correction planes of the balancing answer when
-    unbalance is named: discs, bearings or nodes 'n<j>'; default the two discs furthest
-    apart, balancing.py)."""
+    None: the whole library at its default locations on the recording's rig,
+    ``all_candidates(rig=recording.rig)``), prescreen (route candidates by their
+    fingerprint, prescreen.py; False screens every one fully), sample (run emcee on the
+    nominal and the final model; otherwise their posteriors are Laplace approximations),
+    steps per sampled model, seed, progress callback(text), planes (the two correction
+    planes of the balancing answer when unbalance is named: discs, bearings or nodes
+    'n<j>'; default the two discs furthest apart, balancing.py)."""
 
     log_bf_threshold: float = 3.0
     max_effects: int = 4
-    candidates: tuple[Candidate, ...] = field(default_factory=all_candidates)
+    candidates: tuple[Candidate, ...] | None = None
     prescreen: bool = True
     sample: bool = False
     steps: int = 2000
@@ -228,6 +229,23 @@ def _running_speed(nominal: FittedModel, loc: Location, residual: np.ndarray
                     f"{written:g} rpm written in the record); synchronous candidates use it"}
 
 
+NOMINAL_ADVICE = ("This diagnosis locates it and names what it can (verdict, explanations, "
+                  "unexplained).")
+FINAL_ADVICE = ("The library has no further explanation (see unexplained): read the "
+                "corrected estimates as partly explained.")
+
+
+def _check_locations(candidates: tuple[Candidate, ...], recording: Recording) -> None:
+    """Refuse, before any fitting, a candidate at a shaft node or disc the recording's rig
+    does not have (one line naming the candidate and the rig's range)."""
+    rig = recording.rig
+    for c in candidates:
+        node = node_label(c.location)
+        if node is not None and node > rig.n_nodes:
+            raise BayesAmbError(f"candidate {c.key}: rig {rig.name!r} of recording "
+                                f"{recording.source} has nodes n1 .. n{rig.n_nodes}")
+
+
 @limited_threads
 def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | None = None,
              priors: dict[str, Prior] | None = None,
@@ -243,6 +261,9 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     if opt.planes is not None:
         check_planes(recording.rig, opt.planes)
     names = parse_param_list(",".join(BEARING_COEFFICIENTS) if params is None else params)
+    candidates = (all_candidates(rig=recording.rig) if opt.candidates is None
+                  else tuple(opt.candidates))
+    _check_locations(candidates, recording)
     say = opt.progress or (lambda _: None)
     say("checking the data and fitting the nominal model over the whole band")
     checks, nominal, eps = nominal_assessment(recording, names, priors, opt.seed)
@@ -254,7 +275,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                  LocateOptions(seed=opt.seed))
     before = fit_quality(nominal, eps)
     speed = _running_speed(nominal, loc, before["residual"])
-    pool = (*left_out_coefficients(names), *opt.candidates)
+    pool = (*left_out_coefficients(names), *candidates)
     sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
                             max_effects=0 if checks.failed else opt.max_effects,
                             candidates=pool, prescreen=opt.prescreen)
@@ -313,7 +334,10 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                                      "compared (start-up transient of a record that does "
                                      "not start at rest, or of removed offsets)"},
         "verdict": _verdict(checks, loc, sel.accepted, unexplained),
-        "adequacy": judge(checks, loc, max(before["nrmse"].values())).to_dict(),
+        "adequacy": judge(checks, loc, max(before["nrmse"].values()),
+                          advice=NOMINAL_ADVICE).to_dict(),
+        "adequacy_after": judge(checks, final_loc, max(after["nrmse"].values()),
+                                advice=FINAL_ADVICE).to_dict(),
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,

@@ -249,7 +249,11 @@ def import_controller(source: str | os.PathLike[str], rig: Rig | str | None = No
         A missing or malformed variable, a Ts that disagrees with dt, or a controller that
         does not stabilise the rig (the spectral radius is named).
     """
-    from bayes_amb.control.robustness import full_plant_discrete, loop_spectral_radius
+    from bayes_amb.control.robustness import (
+        full_plant_discrete,
+        loop_spectral_radius,
+        unstable_where,
+    )
     from bayes_amb.rotor import full_model
 
     p = Path(source)
@@ -279,7 +283,8 @@ def import_controller(source: str | os.PathLike[str], rig: Rig | str | None = No
         raise DataImportError(f"{where}: does not stabilise rig '{rig_obj.name}' at "
                               f"{fm.speed_rpm:g} rpm: closed-loop spectral radius {rho:.6g} "
                               f"(>= 1) on the {fm.A.shape[0]}-state plant, with feedback = "
-                              f"'{feedback}' and {how}")
+                              f"'{feedback}' and {how}; "
+                              + unstable_where(Ap, Bp, fm.C, (A, B, C, D), fm.A, float(dt)))
     sens = _modal_sensitivity(Ap, Bp, fm.C, (A, B, C, D), float(dt))
     n, k = A.shape[0], len(CHANNELS)
     Bk = np.hstack([B, np.zeros((n, k))])

@@ -33,6 +33,7 @@ Examples
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -40,7 +41,8 @@ import numpy as np
 
 from bayes_amb.io.atomic import json_text, parse_json_text  # noqa: F401  (doctest)
 
-__all__ = ["NON_FINITE_KEY", "restore_non_finite", "result_json_text", "split_non_finite"]
+__all__ = ["NON_FINITE_KEY", "plain", "read_result_json", "restore_non_finite",
+           "result_json_line", "result_json_text", "split_non_finite"]
 
 NON_FINITE_KEY = "non_finite"
 NOTE_KEY = "non_finite_note"
@@ -83,16 +85,56 @@ def split_non_finite(obj: Any, path: str = "") -> tuple[Any, dict[str, str]]:
     return walk(obj, path), found
 
 
-def result_json_text(obj: dict[str, Any]) -> str:
-    """Deterministic JSON of a result object (:func:`json_text`), non-finite numbers
-    written as null and listed under ``non_finite`` (see the module docstring)."""
+def _marked(obj: dict[str, Any]) -> dict[str, Any]:
     clean, found = split_non_finite({k: v for k, v in obj.items()
                                      if k not in (NON_FINITE_KEY, NOTE_KEY)})
     if found:
         clean[NON_FINITE_KEY] = found
         clean[NOTE_KEY] = (f"{len(found)} number{'s were' if len(found) > 1 else ' was'} "
                            f"not finite (nan or +-inf): null here, see '{NON_FINITE_KEY}'")
-    return json_text(clean)
+    return clean
+
+
+def result_json_text(obj: dict[str, Any]) -> str:
+    """Deterministic JSON of a result object (:func:`json_text`), non-finite numbers
+    written as null and listed under ``non_finite`` (see the module docstring)."""
+    return json_text(_marked(obj))
+
+
+def result_json_line(obj: dict[str, Any]) -> str:
+    """One line of JSON (keys sorted; a row of a .jsonl file), non-finite numbers written
+    as null and listed under ``non_finite`` as in :func:`result_json_text`; no newline.
+
+    >>> line = result_json_line({"b": float("nan"), "a": 1})
+    >>> line[:47]
+    '{"a": 1, "b": null, "non_finite": {"/b": "nan"}'
+    >>> read_result_json(line)
+    {'a': 1, 'b': nan}
+    """
+    return json.dumps(_marked(obj), sort_keys=True, allow_nan=False, ensure_ascii=False)
+
+
+def plain(obj: Any, default: Any = None) -> Any:
+    """``obj`` as JSON would give it back (keys as strings, tuples as lists, numpy scalars
+    and anything ``default`` converts as plain values), non-finite floats kept: the form
+    :func:`result_json_text` takes for objects json.dumps accepts but the strict writer
+    does not (integer keys)."""
+    def conv(o: Any) -> Any:
+        if hasattr(o, "tolist"):
+            return o.tolist()
+        if default is not None:
+            return default(o)
+        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+    return json.loads(json.dumps(obj, default=conv))
+
+
+def read_result_json(text: str) -> Any:
+    """Parse a result file written by :func:`result_json_text` or :func:`result_json_line`
+    and put its non-finite numbers back (:func:`restore_non_finite`); older files with
+    NaN/Infinity tokens parse too."""
+    obj = json.loads(text)
+    return restore_non_finite(obj) if isinstance(obj, dict) else obj
 
 
 def restore_non_finite(obj: dict[str, Any]) -> dict[str, Any]:

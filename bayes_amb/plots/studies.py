@@ -4,13 +4,13 @@ rank histograms and interval coverage. Built from the study's summary and result
 from __future__ import annotations
 
 import csv
-import json
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 from matplotlib.figure import Figure
 
+from bayes_amb.io.nonfinite import read_result_json
 from bayes_amb.plots.style import new_figure, save_figure, style_context, styled
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec
@@ -154,7 +154,7 @@ def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
             for n in spec.estimate:
                 fig = plot_factor(summary, factor, n)
                 paths.append(save_figure(fig, figdir / f"{factor}_{n}.png"))
-        manifest = json.loads((out / "study.json").read_text(encoding="utf-8"))
+        manifest = read_result_json((out / "study.json").read_text(encoding="utf-8"))
         if manifest.get("benchmark"):
             from bayes_amb.plots.discrepancy import plot_benchmark
             paths.append(save_figure(plot_benchmark(manifest["benchmark"]),

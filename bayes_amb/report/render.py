@@ -262,7 +262,12 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
     s, truth = run.summary, run.true_theta()
     dg = run.diagnosis or {}
     adequacy = (dg.get("adequacy") or s.get("adequacy") or {}).get("line")
-    bullets = [f"Adequacy of the model: {adequacy}"] if adequacy else []
+    final = (dg.get("adequacy_after") or {}).get("line") if dg.get("explanations") else None
+    if final:
+        bullets = [f"Adequacy of the final model (after the diagnosis): {final} The nominal "
+                   f"model: {adequacy}"]
+    else:
+        bullets = [f"Adequacy of the model: {adequacy}"] if adequacy else []
     named = [str(e.get("description", e.get("effect", "?")))
              for e in dg.get("explanations") or []]
     after = dg.get("parameters_after") or {}

@@ -175,7 +175,8 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
         first_mode_zeta = zeta_ross
         if beta == 0.0:
             notes.append("the ROSS shaft has no material damping (beta = 0): "
-                         "first_mode_zeta = 0 (give --zeta to add some)")
+                         "first_mode_zeta = 0, undamped bending modes, which a controller "
+                         "check can fail on (give --zeta, e.g. 0.005 for steel)")
     elif not math.isclose(first_mode_zeta, zeta_ross, rel_tol=1e-6, abs_tol=1e-12):
         notes.append(f"first_mode_zeta {first_mode_zeta:g} given replaces the ROSS shaft's "
                      f"damping (beta {beta:g} s, i.e. first_mode_zeta {zeta_ross:.6g})")
@@ -325,4 +326,6 @@ def load_ross_rotor(path: str | os.PathLike[str]) -> Any:
                                f"magnetic bearing ({type(exc).__name__}: {str(exc)[:100]})"
                                ) from None
             b.ki, b.ks, b.sensor_node = mb.ki, mb.ks, mb.sensor_node
+            for k in ("kp_pid", "kd_pid", "ki_pid", "k_amp", "k_sense"):
+                setattr(b, k, getattr(mb, k, None))
     return rotor

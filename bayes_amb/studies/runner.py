@@ -30,6 +30,7 @@ from typing import Any
 from bayes_amb import __version__
 from bayes_amb.errors import StudyInterrupted
 from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.io.nonfinite import plain, read_result_json, result_json_line, result_json_text
 from bayes_amb.studies.replicate import replicate_id, replicate_seeds, run_replicate
 from bayes_amb.studies.spec import StudyError, StudySpec
 from bayes_amb.studies.stopping import StopSignals, kill_processes, worker_init
@@ -45,7 +46,7 @@ def read_rows(path: Path) -> list[dict[str, Any]]:
     rows = []
     for line in path.read_text(encoding="utf-8").splitlines():
         try:
-            rows.append(json.loads(line))
+            rows.append(read_result_json(line))
         except json.JSONDecodeError:
             continue
     return rows
@@ -63,8 +64,11 @@ def drop_torn_tail(path: Path) -> None:
 
 
 def append_row(path: Path, row: dict[str, Any]) -> None:
-    """Append one JSON line atomically enough for a crash: single write, fsync."""
-    data = (json.dumps(row, sort_keys=True, default=_jsonable) + "\n").encode("utf-8")
+    """Append one JSON line atomically enough for a crash: single write, fsync. A
+    non-finite number (a NaN bias of a failed replicate, an infinite interval) is written
+    as null and listed under ``non_finite`` (bayes_amb.io.nonfinite); :func:`read_rows`
+    puts it back."""
+    data = (result_json_line(plain(row, _jsonable)) + "\n").encode("utf-8")
     fd = os.open(path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
     try:
         os.write(fd, data)
@@ -219,12 +223,11 @@ def run_study(spec: StudySpec, out_dir: str | Path, *, workers: int = 2,
     out.mkdir(parents=True, exist_ok=True)
     manifest = out / "study.json"
     if manifest.is_file():
-        old = json.loads(manifest.read_text(encoding="utf-8"))
-        if old.get("study") != json.loads(json.dumps(spec.to_dict(), default=_jsonable)):
+        old = read_result_json(manifest.read_text(encoding="utf-8"))
+        if old.get("study") != plain(spec.to_dict(), _jsonable):
             raise StudyError(f"study folder {out}: field study.json: it holds results of a "
                              "different study definition; use another --out folder")
-    write_text_atomic(manifest, json.dumps(study_manifest(spec), indent=2,
-                                           default=_jsonable) + "\n")
+    write_text_atomic(manifest, result_json_text(plain(study_manifest(spec), _jsonable)))
     results = out / "results.jsonl"
     drop_torn_tail(results)
     done = {r["id"] for r in read_rows(results)}

@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from pathlib import Path
 from typing import Any
@@ -13,6 +12,7 @@ import numpy as np
 from scipy import stats
 
 from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
+from bayes_amb.io.nonfinite import plain, read_result_json, result_json_text
 from bayes_amb.studies.concealed import benchmark_conclusions, benchmark_table
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec, cell_estimate
@@ -173,11 +173,11 @@ def finalise(spec: StudySpec, rows: list[dict[str, Any]], out_dir: str | Path,
     sbc_stats = sbc_statistics(spec, rows) if (sbc if sbc is not None else
                                                 spec.draw_from_prior) else None
     text = conclusions(spec, summ, sbc_stats)
-    manifest = json.loads((out / "study.json").read_text(encoding="utf-8"))
+    manifest = read_result_json((out / "study.json").read_text(encoding="utf-8"))
     manifest.update({"n_rows": len(rows), "failures": sum(bool(r.get("error")) for r in rows),
                      "conclusions": text, "sbc": sbc_stats,
                      "wall_s_total": float(sum(r.get("wall_s", 0.0) for r in rows))})
-    write_text_atomic(out / "study.json", json.dumps(manifest, indent=2) + "\n")
+    write_text_atomic(out / "study.json", result_json_text(plain(manifest)))
     return manifest
 
 
@@ -186,11 +186,11 @@ def _finalise_benchmark(rows: list[dict[str, Any]], out: Path) -> dict[str, Any]
     table = benchmark_table(rows)
     write_csv(out / "summary.csv", [{"case": c, **v} for c, v in table["per_case"].items()])
     _write_netcdf(out / "results.nc", rows)
-    manifest = json.loads((out / "study.json").read_text(encoding="utf-8"))
+    manifest = read_result_json((out / "study.json").read_text(encoding="utf-8"))
     manifest.update({"n_rows": len(rows), "failures": sum(bool(r.get("error")) for r in rows),
                      "conclusions": benchmark_conclusions(table), "benchmark": table,
                      "wall_s_total": float(sum(r.get("wall_s", 0.0) for r in rows))})
-    write_text_atomic(out / "study.json", json.dumps(manifest, indent=2) + "\n")
+    write_text_atomic(out / "study.json", result_json_text(plain(manifest)))
     return manifest
 
 

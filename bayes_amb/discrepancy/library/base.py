@@ -107,7 +107,9 @@ class EffectEntry:
     locations it accepts (e.g. any shaft node); sampled: its sampled parameters (priors,
     nulls); physical: what it reports; equivalences; repeatable: whether the greedy search
     may add it a second time at another location; nominal_family: a coefficient of the
-    nominal model, not physics; make: the candidate at a location.
+    nominal model, not physics; make: the candidate at a location; rig_locations: the
+    default locations on a given rig, where they depend on it (shaft nodes), else None
+    (``locations`` everywhere).
     """
 
     name: str
@@ -123,6 +125,13 @@ class EffectEntry:
     repeatable: bool = False
     nominal_family: bool = False
     scan: str = ""
+    rig_locations: Callable[[Rig], tuple[str, ...]] | None = None
+
+    def locations_on(self, rig: Rig | None) -> tuple[str, ...]:
+        """The default locations on ``rig`` (``locations`` without a rig)."""
+        if rig is None or self.rig_locations is None:
+            return self.locations
+        return tuple(dict.fromkeys(self.rig_locations(rig)))
 
 
 @dataclass(frozen=True)

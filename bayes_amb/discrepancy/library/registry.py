@@ -29,6 +29,7 @@ from bayes_amb.discrepancy.library import (
     unbalance,
 )
 from bayes_amb.discrepancy.library.base import Candidate, EffectEntry
+from bayes_amb.rig import Rig
 
 _MODULES = (actuator_lag, actuator_2nd, time_delay, sensor_lag, sensor_delay, actuator_gain,
             sensor_gain, cross_coupling, flexible_mode, residual_flexibility, unbalance, runout)
@@ -76,11 +77,21 @@ def make_candidate(key: str) -> Candidate:
 
 
 def all_candidates(names: tuple[str, ...] | list[str] | None = None,
-                   representatives: bool = True) -> tuple[Candidate, ...]:
+                   representatives: bool = True, rig: Rig | None = None
+                   ) -> tuple[Candidate, ...]:
     """Every candidate the diagnosis tries: each effect (``names``, default all) at each of
-    its default locations. With ``representatives``, a candidate declared equivalent to one
-    already in the list is left out (its class is reported with the one tried), unless
-    ``names`` asks for its effect alone."""
+    its default locations, on ``rig`` when given (the shaft nodes of unbalance sit at 1/4,
+    1/2 and 3/4 of its bearing span; without a rig, the reference rig's n14, n20, n27).
+    With ``representatives``, a candidate declared equivalent to one already in the list is
+    left out (its class is reported with the one tried), unless ``names`` asks for its
+    effect alone.
+
+    >>> from bayes_amb.rig import load_rig
+    >>> all_candidates() == all_candidates(rig=load_rig("reference"))
+    True
+    >>> [c.location for c in all_candidates(["unbalance"], rig=load_rig("small_rotor"))]
+    ['D1', 'D2', 'n11', 'n17', 'n23']
+    """
     wanted = VOCABULARY if names is None else tuple(names)
     for n in wanted:
         entry(n)
@@ -89,7 +100,7 @@ def all_candidates(names: tuple[str, ...] | list[str] | None = None,
     for n in VOCABULARY:
         if n not in wanted:
             continue
-        for loc in REGISTRY[n].locations:
+        for loc in REGISTRY[n].locations_on(rig):
             c = REGISTRY[n].make(loc)
             if representatives and any(k in keys for k, _ in equivalents_of(c.key)):
                 continue

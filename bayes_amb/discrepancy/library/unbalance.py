@@ -17,7 +17,22 @@ from bayes_amb.rig import Rig
 from bayes_amb.rotor import assemble, dof_index
 
 NODE_SCAN = ("n14", "n20", "n27")
-"""Shaft nodes tried besides the discs (between the bearings, about every 1/4 span)."""
+"""Shaft nodes tried besides the discs on the reference rig (between the bearings, at
+1/4, 1/2 and 3/4 of the span); on any rig :func:`scan_nodes` gives its own."""
+
+
+def scan_nodes(rig: Rig) -> tuple[str, ...]:
+    """The default shaft nodes of ``rig`` tried besides the discs: the nodes nearest 1/4,
+    1/2 and 3/4 of the way from bearing A to bearing B (``NODE_SCAN`` on the reference rig,
+    whose bearings sit at nodes 8 and 33), without repeats.
+
+    >>> from bayes_amb.rig import load_rig
+    >>> scan_nodes(load_rig("reference")), scan_nodes(load_rig("small_rotor"))
+    (('n14', 'n20', 'n27'), ('n11', 'n17', 'n23'))
+    """
+    a, b = rig.bearing_nodes["A"], rig.bearing_nodes["B"]
+    nodes = (round(a + k * (b - a) / 4) for k in (1, 2, 3))
+    return tuple(dict.fromkeys(f"n{j}" for j in nodes))
 
 
 def node_of(rig: Rig, location: str) -> int:
@@ -73,5 +88,6 @@ ENTRY = EffectEntry(
     physical=(Quantity("u_kgm", "kg m", "unbalance"),
               Quantity("phase_deg", "deg", "angle at t = 0 of the record")),
     repeatable=True, scan="n1 .. n<number of nodes> (any shaft node)",
-    make=lambda loc: Unbalance("unbalance", loc))
+    make=lambda loc: Unbalance("unbalance", loc),
+    rig_locations=lambda rig: ("D1", "D2", *scan_nodes(rig)))
 Unbalance.entry = ENTRY
