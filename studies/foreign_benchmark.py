@@ -94,6 +94,9 @@ def accepted_names(effect: dict[str, Any]) -> set[str]:
         return {f"cross_coupling@{p['where']}"}
     if name == "unbalance":
         return {"unbalance@*"}          # the position is a scan; any location names it
+    if name == "seal":                  # its cross-coupled stiffness is the library's kxy
+        node = str(p["node"])           # at the seal's node (its direct terms are not)
+        return {f"cross_coupling@{node if node.startswith('D') else 'n' + node}"}
     return set()
 
 
@@ -110,6 +113,8 @@ def physical_truth(effect: dict[str, Any]) -> dict[str, float]:
         return {"gain": p["gain"]}
     if name == "cross_coupling":
         return {"kxy": p["kxy_nm"]}
+    if name == "seal":
+        return {"kxy": p["k_cross_nm"]}
     if name == "runout":
         return {"amplitude_m": p["amplitude_m"]}
     return {}

@@ -204,3 +204,22 @@ def test_the_coverage_table_counts_from_the_saved_files(tmp_path):
     assert "| current_limit | 2 | 4/8 | 4/8 |" in md
     assert json.loads((tmp_path / "coverage.json").read_text())["families"].keys() == \
         {"control", "current_limit"}
+
+
+def test_a_seals_cross_coupling_is_right_only_at_its_node():
+    """A gas seal's cross-coupled stiffness is the library's kxy at the seal's node; the
+    same name at a bearing is wrong, and so is any other physics."""
+    seal = {"node": 22, "k_direct_nm": 2e5, "k_cross_nm": 3e5, "c_direct_nsm": 200.0,
+            "c_cross_nsm": 20.0}
+    t = _truth(("seal", seal), kind="seal")
+    right = fb.score(t, _report(("cross_coupling", "n22", {"kxy": {"hdi90": [2.8e5, 3.2e5]}},
+                                 "confident", [])))
+    assert right["all_named"] and not right["wrong"]
+    assert right["effect_params_in_hdi"] == [True]
+    wrong = fb.score(t, _report(("cross_coupling", "B", {"kxy": {"hdi90": [2.8e5, 3.2e5]}},
+                                 "confident", [])))
+    assert wrong["wrong_confident"] == ["cross_coupling@B"] and not wrong["all_named"]
+    at_disc = fb.score(_truth(("seal", {**seal, "node": "D1"}), kind="seal"),
+                       _report(("cross_coupling", "D1", {"kxy": {"hdi90": [1e5, 2e5]}},
+                                "confident", [])))
+    assert at_disc["all_named"] and at_disc["effect_params_in_hdi"] == [False]

@@ -139,7 +139,9 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
         clip = clipping(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
         d = (clip_defect(checks.u, clip.limit_a, np.array(clip.centre_a)) if clip.found
              else None)
+    shift = None
     if d is not None:
+        raw = nominal.params.copy()
         corrected = eps
         for _ in range(2):                           # T_r2 at the previous fit
             corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
@@ -149,12 +151,36 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
                 break
             nominal = refit
         eps = corrected
+        shift = nominal.params - raw
+        _widen_for_clip_model(nominal, shift, clip)
     modelled = None if d is None else ("command" if clip is not None else "coil")
     checks = replace(checks, checks=(*checks.checks,
-                                     linearity_check(recording, clip, modelled),
+                                     linearity_check(recording, clip, modelled, shift),
                                      information_check(recording, checks, nominal,
                                                        settle_samples(loop_poles(fwd), 10**12))))
     return checks, nominal, eps
+
+
+CLIP_MODEL_SD = 0.1
+"""Relative sd of the modelled clip's effect on the coefficients when the defect is read
+from a recorded coil current (exact but for the amplifier offset and noise it leaves out);
+with a command-recorded clip it is |1 - gain| + 2 sd(gain) of the clipping regression (the
+free gain's distance from the one the model assumes)."""
+
+
+def _widen_for_clip_model(fitted: FittedModel, shift: np.ndarray, clip) -> None:
+    """The clip is modelled, not known: the coefficients moved by ``shift`` when it was
+    taken in, and a share s of that move is uncertain (the limit, the centres and the
+    amplifier's own noise before the clip). s^2 shift shift^T is added to the Laplace
+    covariance of the coefficients, so every interval built on it (model error, draws,
+    identify's fallback) carries it."""
+    if fitted.cov is None:
+        return
+    s = CLIP_MODEL_SD if clip is None else abs(1.0 - clip.beta) + 2.0 * clip.beta_sd
+    p = fitted.p
+    cov = np.array(fitted.cov, dtype=float)
+    cov[:p, :p] += s**2 * np.outer(shift, shift)
+    fitted.cov = cov
 
 
 UNINFORMED = 0.5

@@ -239,14 +239,16 @@ def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clippin
 
 
 def linearity_check(rec: Recording, clip: Clipping | None = None,
-                    modelled: str | None = None) -> Check:
+                    modelled: str | None = None, shift: NDArray | None = None) -> Check:
     """The ``linearity`` data check: it fails on flat tops in the record, or when the
     clipping regression (given as ``clip``) finds a clipped current in the residual.
     modelled: how the fit took the nonlinearity in ('command': clip(u) at the estimated
-    limit; 'coil': the documented controller's command on the held samples), or None."""
+    limit; 'coil': the documented controller's command on the held samples), or None;
+    shift: how far the coefficients moved when it was modelled."""
     flats = flat_tops(rec)
     values: dict = {"flat_tops": flats, **(clip.to_dict() if clip is not None else {}),
-                    "modelled": modelled}
+                    "modelled": modelled,
+                    "coefficient_shift": None if shift is None else [float(v) for v in shift]}
     problems = list(flats)
     if clip is not None and clip.found:
         problems.append(

@@ -107,11 +107,17 @@ def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed
     """When the model is not adequate (``nominal``: the adequacy's fit, carrying its model
     error), the reported intervals are those of the posterior with the band-wise model
     error integrated out (discrepancy/model_error.py), as diagnose reports them: an
-    interval that covers what the model misses, not one around a biased value. This
-    likelihood's own intervals stay under ``parameters_model_only``."""
+    interval that covers what the model misses, not one around a biased value. The same
+    fit's intervals stand in when this likelihood's own Laplace approximation failed (MAP
+    only), so no interval is NaN. This likelihood's own stay under
+    ``parameters_model_only``."""
     if nominal is None:
         return
     own = summary["parameters"]
+    why = ("the model is not adequate: intervals of the posterior with the band-wise model "
+           "error integrated out (see adequacy)" if nominal.model_error is not None else
+           "this likelihood's Laplace approximation failed at its MAP (no negative-definite "
+           "curvature): intervals of the adequacy's fit (robust Whittle, Laplace)")
     rig = nominal.forward.recording.rig
     widened = theta_summary(nominal, draws(nominal, seed=seed))
     summary["parameters_model_only"] = own
@@ -121,9 +127,7 @@ def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed
             "physical_sd": w["sd"] * abs(get_spec(n).physical_scale(rig)),
             "physical_hdi90": w["physical_hdi90"]}
         for n, w in widened.items() if n in own}
-    summary["parameters_from"] = ("the model is not adequate: intervals of the posterior "
-                                  "with the band-wise model error integrated out (see "
-                                  "adequacy); this model's own in parameters_model_only")
+    summary["parameters_from"] = why + "; this likelihood's own in parameters_model_only"
     summary.pop("laplace_cov", None)     # the correlations of the model-only posterior
 
 
@@ -193,7 +197,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     if opt.adequacy:
         verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
         summary["adequacy"] = verdict.to_dict()
-        if verdict.adequate:
+        if verdict.adequate and not (opt.map_only and cov is None):
             nominal = None
     result = IdentificationResult(names=names, map=m, summary=summary, eps=eps, likelihood=like)
     if opt.map_only:
