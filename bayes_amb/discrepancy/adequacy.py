@@ -19,12 +19,12 @@ from typing import Any
 
 import numpy as np
 
-from bayes_amb.discrepancy.checks import (Check, DataChecks, recompute_u, run_checks,
-                                          settle_samples)
+from bayes_amb.discrepancy.checks import DataChecks, run_checks, settle_samples
+from bayes_amb.discrepancy.clip_model import take_in_clipping
 from bayes_amb.discrepancy.fitstats import fit_quality
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
-from bayes_amb.discrepancy.linearity import (clip_defect, clipping, flat_top_channels,
-                                             linearity_check, r2_response)
+from bayes_amb.discrepancy.information import information_check
+from bayes_amb.discrepancy.linearity import linearity_check
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
 from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.inference.forward import ForwardModel
@@ -116,138 +116,22 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None,
 def nominal_assessment(recording: Recording, names: tuple[str, ...],
                        priors: dict[str, Prior] | None = None, seed: int = 0
                        ) -> tuple[DataChecks, FittedModel, np.ndarray]:
-    """Data checks (with linearity), eps and the nominal fit: the start of a diagnosis.
-
-    A clipping amplifier (linearity.py) is modelled, not absorbed: the plant received the
-    current plus a defect d that enters the loop where r2 does, so eps - T_r2(theta) d is
-    linear in the model again and the nominal fit is redone on it (twice, T_r2 at the
-    previous fit). d is clip(u) - u at the estimated limit when the DAQ recorded the
-    command, or, when it recorded the clipped coil current (flat tops in u_*), the
-    documented controller's output on the held samples minus the recorded current there
-    (eps is then formed from the controller's output)."""
+    """Data checks (with linearity and information), eps and the nominal fit: the start
+    of a diagnosis. A clipping amplifier is modelled, not absorbed (clip_model.py)."""
     fwd = ForwardModel(recording, names)
-    checks = run_checks(recording, loop_poles(fwd))
+    poles = loop_poles(fwd)
+    checks = run_checks(recording, poles)
     eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
     nominal = fit_nominal(recording, names, eps, priors, seed=seed, start=checks.start)
     if not np.isfinite(nominal.log_post):
         return checks, nominal, eps
-    d = _coil_defect(recording, checks)
-    clip = None
-    if d is not None:
-        eps = dual_youla_eps(fwd.parts, checks.y, checks.u - d)     # the commanded current
-    else:
-        clip = clipping(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
-        d = (clip_defect(checks.u, clip.limit_a, np.array(clip.centre_a)) if clip.found
-             else None)
-    shift = None
-    if d is not None:
-        raw = nominal.params.copy()
-        corrected = eps
-        for _ in range(2):                           # T_r2 at the previous fit
-            corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
-            refit = fit_nominal(recording, names, corrected, priors, seed=seed,
-                                start=checks.start)
-            if not np.isfinite(refit.log_post):
-                break
-            nominal = refit
-        eps = corrected
-        shift = nominal.params - raw
-        _widen_for_clip_model(nominal, shift, clip)
-    modelled = None if d is None else ("command" if clip is not None else "coil")
-    checks = replace(checks, checks=(*checks.checks,
-                                     linearity_check(recording, clip, modelled, shift),
-                                     information_check(recording, checks, nominal,
-                                                       settle_samples(loop_poles(fwd), 10**12))))
-    return checks, nominal, eps
-
-
-CLIP_MODEL_SD = 0.1
-"""Relative sd of the modelled clip's effect on the coefficients when the defect is read
-from a recorded coil current (exact but for the amplifier offset and noise it leaves out);
-with a command-recorded clip it is |1 - gain| + 2 sd(gain) of the clipping regression (the
-free gain's distance from the one the model assumes)."""
-
-
-def _widen_for_clip_model(fitted: FittedModel, shift: np.ndarray, clip) -> None:
-    """The clip is modelled, not known: the coefficients moved by ``shift`` when it was
-    taken in, and a share s of that move is uncertain (the limit, the centres and the
-    amplifier's own noise before the clip). s^2 shift shift^T is added to the Laplace
-    covariance of the coefficients, so every interval built on it (model error, draws,
-    identify's fallback) carries it."""
-    if fitted.cov is None:
-        return
-    s = CLIP_MODEL_SD if clip is None else abs(1.0 - clip.beta) + 2.0 * clip.beta_sd
-    p = fitted.p
-    cov = np.array(fitted.cov, dtype=float)
-    cov[:p, :p] += s**2 * np.outer(shift, shift)
-    fitted.cov = cov
-
-
-UNINFORMED = 0.5
-"""A parameter whose Laplace sd exceeds this share of its prior sd is not informed."""
-MEMORIES = 4
-"""A record must be at least this many loop memories long (information_check)."""
-
-
-def information_check(recording: Recording, checks: DataChecks, fitted: FittedModel,
-                      memory: int = 0) -> Check:
-    """The ``information`` data check: does the record inform the parameters at all? It
-    fails when more than half of them keep posterior sds above half their prior sds (a
-    record too short or too weakly excited): their intervals are then their priors', and
-    no physics is named on such a record. Fewer uninformed ones are listed, not failed.
-    It also fails when the record is shorter than MEMORIES times the loop's memory
-    (``memory``: samples for its slowest pole to decay, checks.settle_samples): the
-    frequency-domain likelihood needs a record much longer than the loop remembers."""
-    n = recording.y.shape[0]
-    window = n - checks.start
-    bounds = fitted.post.bounds()[:fitted.p]
-    prior_sd = np.array([(hi - lo) / np.sqrt(12.0) if lo is not None and hi is not None
-                         else np.inf for lo, hi in bounds])
-    if fitted.cov is None:
-        sd = np.full(fitted.p, np.inf)
-    else:
-        sd = np.sqrt(np.maximum(np.diag(fitted.cov)[:fitted.p], 0.0))
-    weak = [name for name, a, b in zip(fitted.names, sd, prior_sd, strict=True)
-            if a > UNINFORMED * b]
-    values = {"samples": int(n), "compared_samples": int(window),
-              "duration_s": float(n * recording.dt), "uninformed": weak}
-    what = (f"the record ({n} samples, {1e3 * n * recording.dt:.3g} ms, {window} compared "
-            "after the start-up)")
-    if n < MEMORIES * memory:
-        return Check("information", False,
-                     f"information: FAILED - {what} is shorter than {MEMORIES} times the "
-                     f"loop's memory ({memory} samples for its slowest pole to decay): it "
-                     "cannot inform the parameters, and their intervals are their priors'. "
-                     "Record longer (seconds, not milliseconds)", {**values,
-                                                                   "loop_memory": memory})
-    if len(weak) * 2 > fitted.p:
-        return Check("information", False,
-                     f"information: FAILED - {what} does not inform {', '.join(weak)}: their "
-                     "posterior sds exceed half their prior sds, so their intervals are "
-                     "their priors'. Record longer or excite more (bayes-amb plan, when it "
-                     "exists, says how much)", values)
-    tail = (f"; not informed: {', '.join(weak)} (intervals near their priors)" if weak
-            else "")
-    return Check("information", True, f"information: {what} informs "
-                 f"{fitted.p - len(weak)} of {fitted.p} parameters" + tail, values)
-
-
-def _coil_defect(recording: Recording, checks: DataChecks) -> np.ndarray | None:
-    """The clip defect of a recorded coil current held at its extremes (flat tops in u_*):
-    recorded minus commanded current on the held samples, zero elsewhere; None when no u
-    channel is held or the controller check failed (the command is then not known)."""
-    held = [c for g, c, _ in flat_top_channels(recording) if g == "u"]
-    if not held or "controller" in checks.failed:
-        return None
-    u_rec = np.asarray(recording.u, dtype=float)
-    command = recompute_u(recording)
-    d = np.zeros_like(u_rec)
-    for c in held:
-        x = u_rec[:, c]
-        tol = 1e-9 * float(np.ptp(x))
-        at = (x >= x.max() - tol) | (x <= x.min() + tol)
-        d[at, c] = (u_rec - command)[at, c]
-    return d
+    taken = take_in_clipping(recording, names, priors, seed, checks, fwd.parts, eps, nominal)
+    checks = replace(checks, checks=(
+        *checks.checks,
+        linearity_check(recording, taken.clip, taken.modelled, taken.shift),
+        information_check(recording, checks, taken.fitted,
+                          settle_samples(poles, 10**12))))
+    return checks, taken.fitted, taken.eps
 
 
 def assess(recording: Recording, names: tuple[str, ...],
