@@ -6,8 +6,9 @@ eps - T_r2(theta) d is linear in the model again, and the nominal fit is redone 
 estimates (linearity.py) when the DAQ recorded the command; when it recorded the clipped
 coil current (flat tops in u_*), d is the documented controller's output on the held
 samples minus the recorded current there, and eps is formed from the controller's output.
-The modelled clip is not known exactly: its share of uncertainty is added to the
-coefficients' covariance (widen_for_clip_model).
+The modelled clip is not known exactly: its uncertainty is the fit's extra_cov, added to
+every interval drawn from it (fitstats.draws): from refits at the limit +- LIMIT_SD, or
+CLIP_MODEL_SD of the coefficients' shift for a recorded coil current.
 """
 
 from __future__ import annotations
@@ -68,31 +69,41 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
             break
         nominal = refit
     shift = nominal.params - raw
-    widen_for_clip_model(nominal, shift, clip)
+    if clip is None:
+        nominal.extra_cov = (CLIP_MODEL_SD**2) * np.outer(shift, shift)
+    else:
+        nominal.extra_cov = _limit_spread(recording, names, priors, seed, checks, eps,
+                                          nominal, clip)
     return TakenIn(nominal, corrected, clip, "command" if clip is not None else "coil", shift)
+
+
+def _limit_spread(recording: Recording, names: tuple[str, ...],
+                  priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
+                  eps: np.ndarray, fitted: FittedModel, clip: Clipping) -> np.ndarray:
+    """The coefficients' covariance from the estimated limit's own error: refits with the
+    limit LIMIT_SD above and below it (the same centres, T_r2 at the fit), half their
+    difference as one sd (rank one)."""
+    ends = []
+    for sign in (1.0, -1.0):
+        d = clip_defect(checks.u, clip.limit_a * (1.0 + sign * LIMIT_SD),
+                        np.array(clip.centre_a))
+        fit = fit_nominal(recording, names,
+                          eps - r2_response(fitted.like.forward, fitted.params, d), priors,
+                          seed=seed, start=checks.start)
+        ends.append(fit.params if np.isfinite(fit.log_post) else fitted.params)
+    half = 0.5 * (ends[0] - ends[1])
+    return np.outer(half, half)
 
 
 CLIP_MODEL_SD = 0.1
 """Relative sd of the modelled clip's effect on the coefficients when the defect is read
-from a recorded coil current (exact but for the amplifier offset and noise it leaves out);
-with a command-recorded clip it is |1 - gain| + 2 sd(gain) of the clipping regression (the
-free gain's distance from the one the model assumes)."""
-
-
-def widen_for_clip_model(fitted: FittedModel, shift: np.ndarray, clip: Clipping | None
-                         ) -> None:
-    """The clip is modelled, not known: the coefficients moved by ``shift`` when it was
-    taken in, and a share s of that move is uncertain (the limit, the centres and the
-    amplifier's own noise before the clip). s^2 shift shift^T is added to the Laplace
-    covariance of the coefficients, so every interval built on it (model error, draws,
-    identify's fallback) carries it."""
-    if fitted.cov is None:
-        return
-    s = CLIP_MODEL_SD if clip is None else abs(1.0 - clip.beta) + 2.0 * clip.beta_sd
-    p = fitted.p
-    cov = np.array(fitted.cov, dtype=float)
-    cov[:p, :p] += s**2 * np.outer(shift, shift)
-    fitted.cov = cov
+from a recorded coil current (exact but for the amplifier offset and noise it leaves out):
+the fit's extra_cov is (0.1 shift)(0.1 shift)^T, shift: how far the coefficients moved."""
+LIMIT_SD = 0.01
+"""Relative sd of an estimated amplifier limit (the regression's profile): 1 %, the
+largest error seen on the command-recorded clips of the first benchmark run (0.2-1 %,
+mean 0.6 %: the amplifier noise and offsets before the clip that d leaves out); with 2 %
+the intervals of a 3-5 % clipped record span most of the prior."""
 
 
 def coil_defect(recording: Recording, checks: DataChecks) -> np.ndarray | None:

@@ -54,14 +54,19 @@ def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
     draws are those of the posterior with the band-wise discrepancy integrated out: the
     Laplace draws from its shifted mean and widened covariance; emcee draws moved by the
     same shift and stretched about the MAP by the map taking one covariance to the other
-    (the open-faced sandwich adjustment of Shaby 2014), then clipped to the prior."""
+    (the open-faced sandwich adjustment of Shaby 2014), then clipped to the prior. A
+    fit's ``extra_cov`` (a modelled clip's uncertainty, clip_model.py) is added last."""
     me = fitted.model_error
     p = fitted.p
     bounds = fitted.post.bounds()[:p]
+    extra = fitted.extra_cov
     if fitted.samples is not None:
         d = fitted.samples.reshape(-1, fitted.samples.shape[-1])[:, :p].copy()
-        if me is not None and fitted.cov is not None:
-            d = _stretch(d, fitted.params, fitted.cov[:p, :p], me.cov[:p, :p]) + me.shift
+        if (me is not None or extra is not None) and fitted.cov is not None:
+            target = (me.cov[:p, :p] if me is not None else fitted.cov[:p, :p]) + (
+                0.0 if extra is None else extra)
+            d = _stretch(d, fitted.params, fitted.cov[:p, :p], target) + (
+                me.shift if me is not None else 0.0)
     else:
         rng = np.random.default_rng(seed)
         if fitted.cov is None:
@@ -75,6 +80,8 @@ def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
         mean, cov = fitted.params, fitted.cov[:p, :p]
         if me is not None:
             mean, cov = mean + me.shift, me.cov[:p, :p]
+        if extra is not None:
+            cov = cov + extra
         d = rng.multivariate_normal(mean, cov, size=n, method="eigh")
     rng = np.random.default_rng(seed + 1)
     for j, (lo, hi) in enumerate(bounds):

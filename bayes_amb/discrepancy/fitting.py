@@ -51,6 +51,8 @@ class FittedModel:
     samples: NDArray | None = None      # emcee draws (walkers, draws, p + 3) when sampled
     log_odds: float | None = None       # log posterior odds when accepted (Multiplicity)
     model_error: ModelError | None = None   # the band-wise model error, once assessed
+    extra_cov: NDArray | None = None    # (p, p) what the fit modelled but does not know
+    #                                     exactly (a modelled clip), added to every interval
 
     @property
     def names(self) -> tuple[str, ...]:
