@@ -66,8 +66,8 @@ def test_the_same_draws_without_a_limit_pass(tmp_path, controller_file):
 
 def test_a_record_of_milliseconds_fails_the_information_check(tmp_path, controller_file):
     """Issue 27: a 49-sample (4.9 ms) record was accepted, with every coefficient pinned at
-    a prior bound by an interval of zero width. Now the information check fails (the loop
-    remembers 8.8 ms), no physics can be named, and no interval has zero width."""
+    a prior bound by an interval of zero width. Now the information check fails (too few
+    frequency bins), no physics can be named, and no interval has zero width."""
     from bayes_amb.discrepancy.fitstats import draws, theta_summary
     rec, _ = _record(tmp_path, controller_file, None)
     csv = tmp_path / "clip_None.csv"
@@ -77,7 +77,7 @@ def test_a_record_of_milliseconds_fails_the_information_check(tmp_path, controll
     (tmp_path / "short.json").write_text((tmp_path / "clip_None.json").read_text())
     checks, nominal, _ = nominal_assessment(load_recording(short), BEARING_COEFFICIENTS)
     info = next(c for c in checks.checks if c.name == "information")
-    assert not info.ok and "loop's memory" in info.line
+    assert not info.ok and "frequency bins" in info.line
     assert "information" in checks.failed
     summary = theta_summary(nominal, draws(nominal))
     assert min(v["hdi90"][1] - v["hdi90"][0] for v in summary.values()) > 0.1

@@ -16,19 +16,21 @@ from bayes_amb.io.recording import Recording
 
 UNINFORMED = 0.5
 """A parameter whose Laplace sd exceeds this share of its prior sd is not informed."""
-MEMORIES = 4
-"""A record must be at least this many loop memories long (information_check)."""
+MIN_BINS = 64
+"""A record must give the likelihood at least this many frequency bins."""
 
 
-def information_check(recording: Recording, checks: DataChecks, fitted: FittedModel,
-                      memory: int = 0) -> Check:
+def information_check(recording: Recording, checks: DataChecks, fitted: FittedModel
+                      ) -> Check:
     """The ``information`` data check: does the record inform the parameters at all? It
-    fails when the record is shorter than MEMORIES times the loop's memory (``memory``:
-    samples for its slowest pole to decay, checks.settle_samples): the frequency-domain
-    likelihood needs a record much longer than the loop remembers, and no physics is
-    named on such a record. Parameters whose posterior sds exceed half their prior sds (a
-    record too weakly excited for them) are listed, not failed: a band-limited process
-    force widens every interval without being a fault of the record."""
+    fails when the compared window gives the likelihood fewer than MIN_BINS frequency bins
+    in the model's validity band (a record of milliseconds): a frequency-domain likelihood
+    needs many bins per band, and no physics is named on such a record. (A criterion on
+    the loop's memory was tried and dropped: a PID's integrator pole makes that memory
+    seconds long while a 1 s record identifies the bearings well.) Parameters whose
+    posterior sds exceed half their prior sds (a record too weakly excited for them) are
+    listed, not failed: a band-limited process force widens every interval without being
+    a fault of the record."""
     n = recording.y.shape[0]
     window = n - checks.start
     bounds = fitted.post.bounds()[:fitted.p]
@@ -44,13 +46,14 @@ def information_check(recording: Recording, checks: DataChecks, fitted: FittedMo
               "duration_s": float(n * recording.dt), "uninformed": weak}
     what = (f"the record ({n} samples, {1e3 * n * recording.dt:.3g} ms, {window} compared "
             "after the start-up)")
-    if n < MEMORIES * memory:
+    bins = int(fitted.like.k.size)
+    values["frequency_bins"] = bins
+    if bins < MIN_BINS:
         return Check("information", False,
-                     f"information: FAILED - {what} is shorter than {MEMORIES} times the "
-                     f"loop's memory ({memory} samples for its slowest pole to decay): it "
-                     "cannot inform the parameters, and their intervals are near their priors'. "
-                     "Record longer (seconds, not milliseconds)", {**values,
-                                                                   "loop_memory": memory})
+                     f"information: FAILED - {what} gives only {bins} frequency bins below "
+                     f"{fitted.like.f_max_hz:.0f} Hz (at least {MIN_BINS} are needed): it "
+                     "cannot inform the parameters, and their intervals are near their "
+                     "priors'. Record longer (seconds, not milliseconds)", values)
     tail = (f"; not informed: {', '.join(weak)} (intervals near their priors)" if weak
             else "")
     return Check("information", True, f"information: {what} informs "

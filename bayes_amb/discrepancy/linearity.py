@@ -21,9 +21,13 @@ clipping    An amplifier that clips a commanded current the DAQ records unclippe
             misfit in some band inflates that band's variance instead of faking a clip).
             For L over a grid of quantiles of |u - median| (pooled over the channels, one
             amplifier type), clipping is found when beta's z exceeds the Bonferroni
-            threshold over the grid and beta reaches one (0.5 .. 2) somewhere on it: the
-            limit is where beta = 1. Linear physics outside the library (a pedestal, a gas
-            seal, a lag) gives beta ~ 0 +- 0.05; a clipping amplifier beta = 1 at the limit.
+            threshold over the grid, beta reaches 0.5 .. 2 somewhere on it, and the z of
+            the same regression with the residual and T_r2 d both freed of their fit on
+            the DFTs of u and the excitation in 48-bin bands (the part of d not linear in
+            the loop's signals) exceeds it too: with r2 excitation a linear misfit (a
+            hidden actuator lag) is linear in the very currents d is cut from. Linear
+            physics outside the library (a pedestal, a gas seal, a lag) gives beta ~ 0
+            +- 0.05; a clipping amplifier beta = 1 at the limit.
 """
 
 from __future__ import annotations
@@ -52,6 +56,9 @@ ALPHA = 1e-4
 GAIN_RANGE = (0.5, 2.0)
 """beta must reach 1 within this range: the clip's path through the loop is known."""
 JAC_STEP = 1e-4
+BAND_BINS = 48
+"""Bins per narrow band of the linear partialling (a smooth linear misfit is nearly
+constant across one)."""
 
 
 @dataclass(frozen=True)
@@ -67,13 +74,15 @@ class Clipping:
     beta: float
     beta_sd: float
     centre_a: tuple[float, ...] = ()
+    z_linear_free: float = 0.0
 
     def to_dict(self) -> dict[str, float | bool]:
         return {"clipping_found": self.found, "clipping_z": self.z,
                 "clipping_limit_a": self.limit_a if self.found else None,
                 "clipped_share": self.share if self.found else None,
                 "clipping_gain": self.beta, "clipping_gain_sd": self.beta_sd,
-                "clipping_centre_a": list(self.centre_a) if self.found else None}
+                "clipping_centre_a": list(self.centre_a) if self.found else None,
+                "clipping_z_linear_free": self.z_linear_free}
 
 
 def flat_tops(rec: Recording) -> list[str]:
@@ -98,6 +107,15 @@ def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
             if share >= FLAT_SHARE and share * n >= 5:
                 found.append((g, c, float(share)))
     return found
+
+
+def _residualise(A: NDArray, Z: NDArray, bands: list[NDArray]) -> NDArray:
+    """A with its least-squares fit on Z removed within each band (A, Z: (nf, .))."""
+    out = A.copy()
+    for idx in bands:
+        Q, _ = np.linalg.qr(Z[idx])
+        out[idx] = A[idx] - Q @ (Q.conj().T @ A[idx])
+    return out
 
 
 def clip_defect(u: NDArray, limit: float, centre: NDArray | None = None) -> NDArray:
@@ -146,6 +164,11 @@ class _Regression:
         self.group = np.tile(np.repeat(band, 4), 2)
         self.u = np.asarray(u, dtype=float)
         self.pooled = np.abs(self.u - np.median(self.u, axis=0)).ravel()
+        w = lfilter(like.prefilter, [1.0], self.u - self.u.mean(axis=0), axis=0)
+        self.U = np.hstack([np.fft.rfft(w[self.start:], axis=0)[like.k], like.X])
+        self.narrow = np.array_split(np.arange(like.k.size),
+                                     max(1, like.k.size // BAND_BINS))
+        self.R_linear_free = _residualise(rows[0], self.U, self.narrow)
 
     def rows(self, V: NDArray) -> NDArray:
         """Whitened bins, real and imaginary parts stacked as regression rows."""
@@ -158,6 +181,20 @@ class _Regression:
         w = lfilter(self.like.prefilter, [1.0], clip_defect(self.u, limit, centre), axis=0)
         D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
         return self.rows(np.einsum("kij,kj->ki", self.H, D))
+
+    def partial_z(self, limit: float, R: NDArray) -> float:
+        """z of the clip regressor after both it and the residual R (nf, 4) are freed of
+        their least-squares fit on the DFTs of u and the excitation within narrow bands
+        (Frisch-Waugh): the part of d that is not linear in the loop's own signals. A
+        linear misfit (a lag the model lacks, which with r2 excitation is linear in the
+        very currents d is cut from) cannot fake it."""
+        w = lfilter(self.like.prefilter, [1.0], clip_defect(self.u, limit), axis=0)
+        D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
+        Z = _residualise(np.einsum("kij,kj->ki", self.H, D), self.U, self.narrow)
+        y, x = self.rows(R), self.rows(Z)
+        b, wt = self.band_weights(x[:, None], y)
+        xw = x * wt
+        return float(b[0] * np.sqrt(np.sum(xw**2)))
 
     def band_weights(self, X: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
         """Least squares of y on X with band-wise residual variances (two passes):
@@ -228,14 +265,15 @@ def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clippin
     z = beta / sd
     j = int(np.argmax(z))
     z_crit = stats.norm.isf(ALPHA / len(limits))
-    found = bool(z[j] > z_crit and beta.max() >= GAIN_RANGE[0]
+    zp = np.array([reg.partial_z(limit, reg.R_linear_free) for limit in limits])
+    found = bool(z[j] > z_crit and zp.max() > z_crit and beta.max() >= GAIN_RANGE[0]
                  and np.any(beta <= GAIN_RANGE[1]))
     limit, centre = float(limits[j]), np.median(reg.u, axis=0)
     if found:
         limit, centre = reg.profile(float(limits[-1]), float(limits[0]), fits[j][2])
     share = float(np.mean(clip_defect(reg.u, limit, centre) != 0))
     return Clipping(found, float(z[j]), limit, share, float(beta[j]), float(sd[j]),
-                    tuple(float(v) for v in centre))
+                    tuple(float(v) for v in centre), float(zp.max()))
 
 
 def linearity_check(rec: Recording, clip: Clipping | None = None,
