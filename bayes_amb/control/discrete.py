@@ -26,6 +26,18 @@ def zoh(A: NDArray, B: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     return Ed[:n, :n], Ed[:n, n:]
 
 
+def ss_response(A: NDArray, B: NDArray, C: NDArray, D: NDArray | None, u: NDArray
+                ) -> NDArray:
+    """Output (N, p) of x+ = A x + B u, y = C x + D u from rest, for inputs u (N, m)."""
+    drive = u @ B.T
+    out = np.zeros((u.shape[0], C.shape[0])) if D is None else u @ np.asarray(D).T
+    xs = np.zeros(A.shape[0])
+    for k in range(u.shape[0]):
+        out[k] += C @ xs
+        xs = A @ xs + drive[k]
+    return out
+
+
 def ss_freqresp(A: NDArray, B: NDArray, C: NDArray, D: NDArray | None, z: NDArray) -> NDArray:
     """C (zI - A)^-1 B + D at each complex point z; shape (n_z, n_out, n_in)."""
     n = A.shape[0]

@@ -39,6 +39,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import detrend
 
+from bayes_amb.control.discrete import ss_response
 from bayes_amb.discrepancy.locate import _coherence
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
@@ -117,14 +118,7 @@ def recompute_u(rec: Recording) -> NDArray:
     ctrl = rec.controller
     v = _controller_inputs(rec)
     A, B, C, D = (np.asarray(m, dtype=float) for m in (ctrl.A, ctrl.B, ctrl.C, ctrl.D))
-    Cu, Du = C[:4], D[:4]
-    xs = np.zeros(A.shape[0])
-    out = np.empty((v.shape[0], 4))
-    drive = v @ B.T
-    feed = v @ Du.T
-    for k in range(v.shape[0]):
-        out[k] = Cu @ xs + feed[k]
-        xs = A @ xs + drive[k]
+    out = ss_response(A, B, C[:4], D[:4], v)
     r2 = rec.excitation.get("r2")
     return out if r2 is None else out + np.asarray(r2, dtype=float)
 

@@ -21,6 +21,7 @@ from bayes_amb.discrepancy.checks import DataChecks, recompute_u
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
 from bayes_amb.discrepancy.linearity import (
     Clipping,
+    at_extremes,
     clip_defect,
     clipping,
     flat_top_channels,
@@ -117,8 +118,7 @@ def coil_defect(recording: Recording, checks: DataChecks) -> np.ndarray | None:
     command = recompute_u(recording)
     d = np.zeros_like(u_rec)
     for c in held:
-        x = u_rec[:, c]
-        tol = 1e-9 * float(np.ptp(x))
-        at = (x >= x.max() - tol) | (x <= x.min() + tol)
+        top, bottom = at_extremes(u_rec[:, c])
+        at = top | bottom
         d[at, c] = (u_rec - command)[at, c]
     return d

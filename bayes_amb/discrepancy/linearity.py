@@ -39,7 +39,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 from scipy.signal import lfilter
 
-from bayes_amb.control.discrete import ss_freqresp_modal
+from bayes_amb.control.discrete import ss_freqresp_modal, ss_response
 from bayes_amb.discrepancy.checks import Check
 from bayes_amb.discrepancy.locate import locate_bands
 from bayes_amb.io.recording import Recording
@@ -98,15 +98,20 @@ def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
         v = np.asarray(v, dtype=float)
         n = v.shape[0]
         for c in range(len(CHANNELS)):
-            x = v[:, c]
-            span = float(np.ptp(x))
-            if span <= 0:
+            if np.ptp(v[:, c]) <= 0:
                 continue
-            tol = 1e-9 * span
-            share = max(np.sum(x >= x.max() - tol), np.sum(x <= x.min() + tol)) / n
+            top, bottom = at_extremes(v[:, c])
+            share = max(np.sum(top), np.sum(bottom)) / n
             if share >= FLAT_SHARE and share * n >= 5:
                 found.append((g, c, float(share)))
     return found
+
+
+def at_extremes(x: NDArray) -> tuple[NDArray, NDArray]:
+    """Masks of the samples of x at its maximum and at its minimum (within 1e-9 of its
+    span)."""
+    tol = 1e-9 * float(np.ptp(x))
+    return x >= x.max() - tol, x <= x.min() + tol
 
 
 def _residualise(A: NDArray, Z: NDArray, bands: list[NDArray]) -> NDArray:
@@ -129,14 +134,7 @@ def r2_response(forward, theta: NDArray, d: NDArray) -> NDArray:
     """The model's eps response (N, 4) from rest to a current d (N, 4) added at the plant
     input, as r2 is (the noise system's r2 port at theta)."""
     A, B, C, D = forward.noise_system(np.asarray(theta, dtype=float))
-    B2, D2 = B[:, 8:12], np.asarray(D)[:, 8:12]
-    drive = d @ B2.T
-    xs = np.zeros(A.shape[0])
-    out = d @ D2.T
-    for k in range(d.shape[0]):
-        out[k] += C @ xs
-        xs = A @ xs + drive[k]
-    return out
+    return ss_response(A, B[:, 8:12], C, np.asarray(D)[:, 8:12], d)
 
 
 class _Regression:
@@ -168,7 +166,7 @@ class _Regression:
         self.U = np.hstack([np.fft.rfft(w[self.start:], axis=0)[like.k], like.X])
         self.narrow = np.array_split(np.arange(like.k.size),
                                      max(1, like.k.size // BAND_BINS))
-        self.R_linear_free = _residualise(rows[0], self.U, self.narrow)
+        self.y_linear_free = self.rows(_residualise(rows[0], self.U, self.narrow))
 
     def rows(self, V: NDArray) -> NDArray:
         """Whitened bins, real and imaginary parts stacked as regression rows."""
@@ -176,25 +174,26 @@ class _Regression:
         return np.concatenate([w.real.reshape(-1, *V.shape[2:]),
                                w.imag.reshape(-1, *V.shape[2:])])
 
-    def z_rows(self, limit: float, centre: NDArray | None = None) -> NDArray:
-        """Regression rows of T_r2 d for the clip defect at this limit and centre."""
+    def clip_dft(self, limit: float, centre: NDArray | None = None) -> NDArray:
+        """T_r2 d in the likelihood's bins (nf, 4), d the clip defect at this limit and
+        centre, prefiltered and windowed as the residual is."""
         w = lfilter(self.like.prefilter, [1.0], clip_defect(self.u, limit, centre), axis=0)
         D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
-        return self.rows(np.einsum("kij,kj->ki", self.H, D))
+        return np.einsum("kij,kj->ki", self.H, D)
 
-    def partial_z(self, limit: float, R: NDArray) -> float:
-        """z of the clip regressor after both it and the residual R (nf, 4) are freed of
-        their least-squares fit on the DFTs of u and the excitation within narrow bands
+    def z_rows(self, limit: float, centre: NDArray | None = None) -> NDArray:
+        """Regression rows of T_r2 d for the clip defect at this limit and centre."""
+        return self.rows(self.clip_dft(limit, centre))
+
+    def partial_z(self, limit: float) -> float:
+        """z of the clip regressor after both it and the residual are freed of their
+        least-squares fit on the DFTs of u and the excitation within narrow bands
         (Frisch-Waugh): the part of d that is not linear in the loop's own signals. A
         linear misfit (a lag the model lacks, which with r2 excitation is linear in the
         very currents d is cut from) cannot fake it."""
-        w = lfilter(self.like.prefilter, [1.0], clip_defect(self.u, limit), axis=0)
-        D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
-        Z = _residualise(np.einsum("kij,kj->ki", self.H, D), self.U, self.narrow)
-        y, x = self.rows(R), self.rows(Z)
-        b, wt = self.band_weights(x[:, None], y)
-        xw = x * wt
-        return float(b[0] * np.sqrt(np.sum(xw**2)))
+        x = self.rows(_residualise(self.clip_dft(limit), self.U, self.narrow))
+        b, wt = self.band_weights(x[:, None], self.y_linear_free)
+        return float(b[0] * np.sqrt(np.sum((x * wt) ** 2)))
 
     def band_weights(self, X: NDArray, y: NDArray) -> tuple[NDArray, NDArray]:
         """Least squares of y on X with band-wise residual variances (two passes):
@@ -265,7 +264,7 @@ def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clippin
     z = beta / sd
     j = int(np.argmax(z))
     z_crit = stats.norm.isf(ALPHA / len(limits))
-    zp = np.array([reg.partial_z(limit, reg.R_linear_free) for limit in limits])
+    zp = np.array([reg.partial_z(limit) for limit in limits])
     found = bool(z[j] > z_crit and zp.max() > z_crit and beta.max() >= GAIN_RANGE[0]
                  and np.any(beta <= GAIN_RANGE[1]))
     limit, centre = float(limits[j]), np.median(reg.u, axis=0)
