@@ -95,8 +95,14 @@ def accepted_names(effect: dict[str, Any]) -> set[str]:
     if name == "unbalance":
         return {"unbalance@*"}          # the position is a scan; any location names it
     if name == "seal":                  # its cross-coupled stiffness is the library's kxy
-        node = str(p["node"])           # at the seal's node (its direct terms are not)
-        return {f"cross_coupling@{node if node.startswith('D') else 'n' + node}"}
+        node = str(p["node"])           # at the seal's node, its direct terms the library's
+        if node.startswith("D"):        # direct_terms there (fitted beside it)
+            return {f"cross_coupling@{node}"}
+        # between the bearings: also the diagnosis' default scan node there (nearest mid
+        # span), to the scan's resolution, as an unbalance is named by any scan node
+        a, b = sorted(load_rig().bearing_nodes.values())
+        mid = {f"cross_coupling@n{round((a + b) / 2)}"} if a < int(node) < b else set()
+        return {f"cross_coupling@n{node}", *mid}
     return set()
 
 
@@ -111,10 +117,10 @@ def physical_truth(effect: dict[str, Any]) -> dict[str, float]:
         return {"delay_s": p["delay_s"]}
     if name in ("actuator_gain", "sensor_gain"):
         return {"gain": p["gain"]}
-    if name == "cross_coupling":
-        return {"kxy": p["kxy_nm"]}
+    if name == "cross_coupling":        # no direct terms (K, C: where they are fitted)
+        return {"kxy": p["kxy_nm"], "K": 0.0, "C": 0.0}
     if name == "seal":
-        return {"kxy": p["k_cross_nm"]}
+        return {"kxy": p["k_cross_nm"], "K": p["k_direct_nm"], "C": p["c_direct_nsm"]}
     if name == "runout":
         return {"amplitude_m": p["amplitude_m"]}
     return {}
@@ -191,6 +197,17 @@ def flexible_names(truth: dict[str, Any]) -> set[str]:
     return {f"flexible_mode@bending pair {k}" for k in range(1, truth.get("n_bending", 0) + 1)}
 
 
+def _direct_terms_at(report: dict[str, Any], expl: dict[str, Any]) -> dict[str, Any]:
+    """The direct stiffness K and damping C the diagnosis fitted beside a cross-coupling
+    at a node (diagnosis.json 'direct_terms'), as that explanation's parameters."""
+    if expl["effect"] != "cross_coupling":
+        return {}
+    for d in report.get("direct_terms", []):
+        if d["location"] == expl["location"]:
+            return d["params"]
+    return {}
+
+
 def score(truth: dict[str, Any], report: dict[str, Any],
           controller_file: Path | None = None) -> dict[str, Any]:
     """One benchmark row from the truth file and diagnosis.json (read after diagnosis).
@@ -213,7 +230,7 @@ def score(truth: dict[str, Any], report: dict[str, Any],
         found.append(bool(hits))
         right_expl.update(hits)
         if hits:
-            par = phys[hits[0]]["params"]
+            par = {**phys[hits[0]]["params"], **_direct_terms_at(report, phys[hits[0]])}
             inside += [par[k]["hdi90"][0] <= v <= par[k]["hdi90"][1]
                        for k, v in phys_truth.items() if k in par]
             if "unbalance@*" in keys and controller_file is not None \

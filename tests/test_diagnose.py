@@ -88,7 +88,7 @@ def test_effect_free_recording_raises_no_alarm(control):
     # the six coefficients left out of the fit are tried first, then every physics candidate
     left_out = {("bearing_coefficient", n) for n in BEARING_COEFFICIENTS
                 if n not in ("k_By", "c_By")}
-    assert tried == {(c.effect, c.location) for c in all_candidates()} | left_out
+    assert tried == {(c.effect, c.location) for c in all_candidates(rig=load_rig())} | left_out
 
 
 def _mid_operation(rec, cut: int, y_offset, u_offset):

@@ -223,3 +223,15 @@ def test_a_seals_cross_coupling_is_right_only_at_its_node():
                        _report(("cross_coupling", "D1", {"kxy": {"hdi90": [1e5, 2e5]}},
                                 "confident", [])))
     assert at_disc["all_named"] and at_disc["effect_params_in_hdi"] == [False]
+    # the default scan node between the bearings (n20 on the reference rig) names a seal
+    # between them; its direct terms are scored from diagnosis.json's direct_terms
+    scan = _report(("cross_coupling", "n20", {"kxy": {"hdi90": [2.8e5, 3.2e5]}},
+                    "confident", []))
+    scan["direct_terms"] = [{"effect": "direct_terms", "location": "n20",
+                             "params": {"K": {"hdi90": [1.5e5, 2.5e5]},
+                                        "C": {"hdi90": [250.0, 300.0]}}}]
+    at_scan = fb.score(t, scan)
+    assert at_scan["all_named"] and not at_scan["wrong"]
+    assert at_scan["effect_params_in_hdi"] == [True, True, False]
+    off = fb.score(_truth(("seal", {**seal, "node": 5}), kind="seal"), scan)
+    assert off["wrong_confident"] == ["cross_coupling@n20"]

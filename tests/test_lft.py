@@ -57,21 +57,34 @@ def assert_same_change(A_lft, A_phys, A0):
     return cols_lft
 
 
-@pytest.mark.parametrize("name", list(PARAMETERS))
+@pytest.mark.parametrize("name", [*PARAMETERS, "kd_D1", "cd_n20"])
 def test_lft_full_is_exact_for_every_parameter(fm, rig, name):
     """Identity (eqs. 47-50): A_f + B_w theta C_z equals the physically changed A_f for each
-    parameter; k/c change one column (position / velocity state), kxy two."""
+    parameter; k/c change one column (position / velocity state), kxy and the direct kd two
+    position columns, cd two velocity columns."""
     up = lft_full(fm, rig, name)
     theta = 0.37
     cols = assert_same_change(up.A_theta([theta]), physical_A(fm, rig, {name: theta}), fm.A)
     spec = get_spec(name)
     n_q = fm.matrices.n_q
-    if spec.kind == "kxy":
+    if spec.kind in ("kxy", "kd"):
         assert cols.size == 2 and np.all(cols < n_q)
+    elif spec.kind == "cd":
+        assert cols.size == 2 and np.all(cols >= n_q)
     elif spec.kind == "k":
         assert cols.size == 1 and cols[0] < n_q
     else:
         assert cols.size == 1 and cols[0] >= n_q
+
+
+def test_direct_terms_at_a_node_only(rig):
+    """kd/cd exist at discs and shaft nodes, not at a bearing (there they are k_* and c_*);
+    their physical scales are k_ref and c_ref."""
+    assert get_spec("kd_D2").physical_scale(rig) == rig.k_ref
+    assert get_spec("cd_n7").physical_scale(rig) == rig.c_ref
+    for bad in ("kd_A", "cd_B", "kd_", "kd_X3"):
+        with pytest.raises(ParameterError):
+            get_spec(bad)
 
 
 def test_lft_full_several_parameters_sum(fm, rig):

@@ -36,6 +36,7 @@ from bayes_amb.discrepancy.candidates import (
     left_out_coefficients,
 )
 from bayes_amb.discrepancy.checks import DataChecks
+from bayes_amb.discrepancy.direct_terms import averaged, direct_companions, with_direct_terms
 from bayes_amb.discrepancy.fitstats import (
     draws,
     effect_summaries,
@@ -201,6 +202,19 @@ def _model_error_dict(fm: FittedModel) -> dict[str, Any] | None:
     return None if fm.model_error is None else fm.model_error.to_dict()
 
 
+def _after_from(named: FittedModel, reported: FittedModel, mixed: bool) -> str:
+    """How parameters_after was obtained (direct_terms.py), in one line."""
+    parts = ["the named model" if named.candidates else "the nominal model"]
+    if reported is not named:
+        parts.append("with the direct stiffness and damping of its node forces fitted beside "
+                     "them (" + ", ".join(c.location for c in direct_companions(named)) + ")")
+    parts.append("its model error integrated out")
+    if mixed:
+        parts.append("averaged with the nominal model in equal parts, since the naming is "
+                     "tentative")
+    return ", ".join(parts)
+
+
 def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
              unexplained: dict[str, Any]) -> str:
     if checks.failed:
@@ -289,17 +303,24 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     else:
         final_loc = loc
     unexplained = unexplained_block(final_loc, sel.final)
+    reported = with_direct_terms(sel.final, priors)
+    if reported is not sel.final:
+        say("fitting the direct stiffness and damping beside the cross-coupling at "
+            + ", ".join(c.location for c in direct_companions(sel.final)))
     if opt.sample:
-        for i, fm in enumerate({id(m): m for m in (nominal, sel.final)}.values()):
+        for i, fm in enumerate({id(m): m for m in (nominal, reported)}.values()):
             say(f"sampling the posterior of model {i + 1}")
             _sample(fm, opt.steps, opt.seed + i)
     say("integrating the model error out of the posteriors")
-    for fm in {id(m): m for m in (nominal, sel.final)}.values():
+    for fm in {id(m): m for m in (nominal, reported)}.values():
         fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names)
     after = fit_quality(sel.final, eps)
-    s_nom, s_fin = draws(nominal, seed=opt.seed), draws(sel.final, seed=opt.seed)
-    effects = effect_summaries(sel.final, s_fin)
+    s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
+    all_effects = effect_summaries(reported, s_fin)
+    effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
     confidence = "tentative" if unexplained["present"] else "confident"
+    s_coef = (averaged(s_fin, s_nom, nominal.p) if confidence == "tentative" and sel.accepted
+              else s_fin)
     explanations = []
     for fm, eff in zip(sel.accepted, effects, strict=True):
         cand = fm.candidates[-1]
@@ -347,9 +368,11 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                 "after": {k: after[k] for k in ("nrmse", "whiteness_p")},
                 "log_likelihood_gain": float(sel.final.log_post - nominal.log_post)},
         "parameters_before": theta_summary(nominal, s_nom),
-        "parameters_after": theta_summary(sel.final, s_fin),
+        "parameters_after": theta_summary(reported, s_coef),
+        "parameters_after_from": _after_from(sel.final, reported, s_coef is not s_fin),
+        "direct_terms": direct,
         "model_error": {"before": _model_error_dict(nominal),
-                        "after": _model_error_dict(sel.final)},
+                        "after": _model_error_dict(reported)},
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "
                       "likelihood; prior odds 1/K for each of the K candidates of a round; "
                       f"accept above log posterior odds {opt.log_bf_threshold:g}"),

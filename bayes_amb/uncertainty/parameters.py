@@ -16,6 +16,13 @@ kxy_A, kxy_B, kxy_D1, kxy_D2
     Destabilising cross-coupled stiffness at bearing A, B or disc D1, D2 (seal or
     aerodynamic kind): f_x = -kxy*y, f_y = +kxy*x with kxy = theta * k_ref, in N/m. Each uses
     two columns of A_f (the x and y DOFs of its node).
+kd_<loc>, cd_<loc> (loc a disc D1, D2 or a shaft node n<j>; not at a bearing, where they
+    would be the bearing's own k and c)
+    Isotropic direct stiffness and damping at a node: f_x = -K x - C vx, f_y = -K y - C vy
+    with K = theta * k_ref (N/m), C = theta * c_ref (N s/m). A seal's or impeller's force
+    carries them beside its cross-coupled stiffness; the diagnosis fits them beside an
+    accepted cross-coupling at a node so that the bearing coefficients do not take them
+    (discrepancy/direct_terms.py). Two columns of A_f each.
 """
 
 from __future__ import annotations
@@ -35,9 +42,9 @@ class ParameterSpec:
     """One named parameter: what it changes, its physical scale and unit."""
 
     name: str
-    kind: str          # "k", "c" or "kxy"
-    location: str      # "A", "B", "D1", "D2"
-    axis: str | None   # "x"/"y" for k and c; None for kxy
+    kind: str          # "k", "c", "kxy", or "kd" / "cd" (direct, isotropic, at a node)
+    location: str      # "A", "B", "D1", "D2" or "n<j>"
+    axis: str | None   # "x"/"y" for k and c; None for kxy, kd, cd
     meaning: str
     unit: str
     physical_label: str
@@ -46,7 +53,7 @@ class ParameterSpec:
         """Physical value per unit theta (N/m or N s/m)."""
         if self.kind == "k":
             return -rig.ks
-        if self.kind == "c":
+        if self.kind in ("c", "cd"):
             return rig.c_ref
         return rig.k_ref
 
@@ -81,9 +88,31 @@ PARAMETERS: dict[str, ParameterSpec] = _build_vocabulary()
 """All parameter names in their canonical order."""
 
 
+_DIRECT = {"kd": ("direct stiffness", "f = -K q, K = theta k_ref", "N/m"),
+           "cd": ("direct damping", "f = -C dq/dt, C = theta c_ref", "N s/m")}
+
+
+def _direct_spec(name: str) -> ParameterSpec | None:
+    """kd_<loc> / cd_<loc> at a disc or shaft node (None if the name is not of that form)."""
+    kind, _, loc = name.partition("_")
+    if kind not in _DIRECT or not loc:
+        return None
+    node = node_label(loc)
+    if loc not in ("D1", "D2") and node is None:
+        return None
+    where = f"disc {loc}" if node is None else f"shaft node {node}"
+    what, law, unit = _DIRECT[kind]
+    return ParameterSpec(name, kind, loc if node is None else f"n{node}", None,
+                         f"isotropic {what} at {where}: {law}", unit, kind)
+
+
 def get_spec(name: str) -> ParameterSpec:
-    """The spec of a parameter name: one of PARAMETERS, or kxy_n<j>, a cross-coupled
-    stiffness at shaft node j (1-based; checked against the rig where it is used)."""
+    """The spec of a parameter name: one of PARAMETERS, kxy_n<j>, a cross-coupled
+    stiffness at shaft node j (1-based; checked against the rig where it is used), or
+    kd_<loc> / cd_<loc>, direct stiffness / damping at a disc or shaft node."""
+    direct = None if name in PARAMETERS else _direct_spec(name)
+    if direct is not None:
+        return direct
     if name not in PARAMETERS:
         node = node_label(name.removeprefix("kxy_")) if name.startswith("kxy_") else None
         if node is not None:
@@ -91,7 +120,7 @@ def get_spec(name: str) -> ParameterSpec:
                                  f"cross-coupled stiffness at shaft node {node}: "
                                  "f_x = -kxy y, f_y = +kxy x, kxy = theta k_ref", "N/m", "kxy")
         raise ParameterError(f"unknown parameter name {name!r}; known: {', '.join(PARAMETERS)}"
-                             ", kxy_n<node>")
+                             ", kxy_n<node>, kd_<disc or node>, cd_<disc or node>")
     return PARAMETERS[name]
 
 
@@ -132,6 +161,11 @@ def physical_change(spec: ParameterSpec, rig: Rig, theta: float,
     elif spec.kind == "c":
         j = dof_index(node, spec.axis)
         dC[j, j] = theta * rig.c_ref
+    elif spec.kind in ("kd", "cd"):
+        M = dK if spec.kind == "kd" else dC
+        for ax in ("x", "y"):
+            j = dof_index(node, ax)
+            M[j, j] = theta * spec.physical_scale(rig)
     else:
         jx, jy = dof_index(node, "x"), dof_index(node, "y")
         kxy = theta * rig.k_ref
@@ -143,7 +177,7 @@ def physical_change(spec: ParameterSpec, rig: Rig, theta: float,
 def lft_columns(spec: ParameterSpec, rig: Rig, mats: RotorMatrices) -> tuple[NDArray, NDArray]:
     """(B_w_f, C_z_f) of one parameter (eqs. 49-50): shapes (2 n_q, r) and (r, 2 n_q).
 
-    A_f(theta) = A_f + B_w_f * theta * C_z_f, with r = 1 (k, c) or 2 (kxy).
+    A_f(theta) = A_f + B_w_f * theta * C_z_f, with r = 1 (k, c) or 2 (kxy, kd, cd).
     """
     n_q = mats.n_q
     Mi = mats.M_inv
@@ -158,6 +192,15 @@ def lft_columns(spec: ParameterSpec, rig: Rig, mats: RotorMatrices) -> tuple[NDA
         row[j if spec.kind == "k" else n_q + j] = 1.0
         cols.append(col)
         rows.append(row)
+    elif spec.kind in ("kd", "cd"):
+        for ax in ("x", "y"):
+            j = dof_index(node, ax)
+            col = np.zeros(2 * n_q)
+            col[n_q:] = -Mi[:, j] * spec.physical_scale(rig)
+            row = np.zeros(2 * n_q)
+            row[j if spec.kind == "kd" else n_q + j] = 1.0
+            cols.append(col)
+            rows.append(row)
     else:
         jx, jy = dof_index(node, "x"), dof_index(node, "y")
         for src, dst, sign in ((jy, jx, 1.0), (jx, jy, -1.0)):
