@@ -298,6 +298,24 @@ def test_actuator_and_sensor_effects_are_the_right_multiplicative_dynamics(effec
         assert np.abs(G1 - G0).max() > 1e-3 * np.abs(G0).max()
 
 
+def test_eddy_currents_are_the_slab_diffusion_law_not_a_first_order_lag():
+    """G_eff = G diag(h) with h = tanh(sqrt(s tau)) / sqrt(s tau) on bearing B's axes, to
+    the truncation of its partial fractions (the tail beyond 16 terms differs from its
+    static gain by at most sum 2 |s tau| / a_k^4 < 1e-4 below 1.2 kHz); at 1.2 kHz it is
+    not the first-order lag of the same corner (a foreign form of actuator_lag)."""
+    fc = 900.0
+    tau = 3.0 / (2 * np.pi * fc)
+    p0 = _plant(())
+    p1 = _plant((Effect("eddy_current", {"corner_hz": fc, "where": "B"}),))
+    for f_hz in (20.0, 300.0, 1200.0):
+        s = 2j * np.pi * f_hz
+        z = np.sqrt(s * tau)
+        h = np.tanh(z) / z
+        G0, G1 = _frf(p0.A, p0.B, p0.C, f_hz), _frf(p1.A, p1.B, p1.C, f_hz)
+        assert np.abs(G1 - G0 @ np.diag([1, 1, h, h])).max() < 1e-4 * np.abs(G0).max()
+    assert abs(h - _h1(fc)(s)) > 0.05
+
+
 def test_cross_coupling_is_the_tools_kxy_parameter():
     """kxy at disc D1 in the reduced truth = the tool's reduced LFT at theta = kxy / k_ref."""
     from bayes_amb.reduction import reduce_pseudo_modal

@@ -220,6 +220,8 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float,
         p = {"bandwidth_hz": u(300, 2000), "where": str(rng.choice(_WHERE))}
     elif name == "actuator_2nd":
         p = {"natural_hz": u(600, 2500), "zeta": u(0.4, 0.9), "where": str(rng.choice(_WHERE))}
+    elif name == "eddy_current":
+        p = {"corner_hz": u(300, 2000), "where": str(rng.choice(_WHERE))}
     elif name == "sensor_lag":
         p = {"bandwidth_hz": u(500, 3000), "where": str(rng.choice(_WHERE))}
     elif name in ("actuator_delay", "sensor_delay"):
@@ -272,6 +274,8 @@ def _weaker(e: Effect, f: float = 0.7) -> Effect:
         p["bandwidth_hz"] /= f
     elif e.name == "actuator_2nd":
         p["natural_hz"] /= f
+    elif e.name == "eddy_current":
+        p["corner_hz"] /= f
     elif e.name in ("actuator_delay", "sensor_delay"):
         p["delay_s"] *= f
     elif e.name in ("actuator_gain", "sensor_gain"):
