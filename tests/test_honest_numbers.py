@@ -60,3 +60,41 @@ def test_adequacy_line_says_what_was_found():
     assert not a.adequate and not a.nonlinear and "NOT assessed" in a.line
     a = judge(_checks(), _loc(True), 1e-9)                    # rounding, not a mismatch
     assert a.adequate and "rounding" in a.line
+
+
+def test_rig_file_limits_are_a_linearity_data_check():
+    """Issue 27: the rig file's [limits] (amplifier current, slew rate, probe range) fail
+    the linearity check on a record that reaches them on >= 0.1 % of the samples."""
+    from bayes_amb.discrepancy.linearity import limit_hits
+    rng = np.random.default_rng(2)
+    u = rng.normal(0, 0.2, (20000, 4))
+    y = rng.normal(0, 1e-5, (20000, 4))
+    rec = SimpleNamespace(u=u, y=y, dt=1e-4, rig=SimpleNamespace(limits={}))
+    assert limit_hits(rec) == []
+    # 0.6 A is 3 sd: 0.27 % of the samples of each channel reach it
+    rec.rig.limits = {"current_a": 0.6}
+    hits = limit_hits(rec)
+    assert len(hits) == 4 and all("limits.current_a" in h for h in hits)
+    rec.rig.limits = {"current_a": 1.0}                     # 5 sd: none
+    assert limit_hits(rec) == []
+    rec.rig.limits = {"sensor_range_m": 3.5e-5}             # 3.5 sd: 0.05 %, below 0.1 %
+    assert limit_hits(rec) == []
+    y[:50, 1] = 3.5e-5                                      # a probe at its range end
+    assert [h.split()[0] for h in limit_hits(rec)] == ["y_Ay"]
+    rec.rig.limits = {"slew_a_per_s": 0.2 * np.sqrt(2) * 3 / 1e-4}
+    assert all("du/dt" in h for h in limit_hits(rec)) and len(limit_hits(rec)) == 4
+
+
+def test_rig_file_limits_are_read_and_checked():
+    from bayes_amb.errors import RigError
+    from bayes_amb.rig import load_rig
+    from bayes_amb.rig.rig import rig_from_dict
+    d = load_rig().to_dict()
+    rig = rig_from_dict({**d, "limits": {"current_a": 2.0, "sensor_range_m": 4e-4}})
+    assert rig.limits == {"current_a": 2.0, "sensor_range_m": 4e-4}
+    assert rig_from_dict(rig.to_dict()).limits == rig.limits
+    for bad, field in (({"current": 2.0}, "limits.current"),
+                       ({"current_a": -1.0}, "limits.current_a"),
+                       ({"slew_a_per_s": "fast"}, "limits.slew_a_per_s")):
+        with pytest.raises(RigError, match=field.replace(".", r"\.")):
+            rig_from_dict({**d, "limits": bad})

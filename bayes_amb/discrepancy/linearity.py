@@ -107,6 +107,36 @@ def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
     return found
 
 
+LIMIT_REACHED = 0.995
+"""A sample reaches a rig-file limit at this fraction of it (or beyond: a recorded command
+may exceed what the amplifier delivered)."""
+
+
+def limit_hits(rec: Recording) -> list[str]:
+    """Channels that reach a limit of the rig file's [limits] on at least FLAT_SHARE of
+    the samples (and 5 of them): the amplifier current |u|, its slew rate |du/dt|, the
+    probes' range |y|."""
+    lim = getattr(rec.rig, "limits", None) or {}
+    u, y = np.asarray(rec.u, dtype=float), np.asarray(rec.y, dtype=float)
+    series = {"current_a": ("u", np.abs(u), "A", "the amplifier current limit"),
+              "slew_a_per_s": ("du/dt of u", np.abs(np.diff(u, axis=0)) / rec.dt, "A/s",
+                               "the amplifier slew-rate limit"),
+              "sensor_range_m": ("y", np.abs(y), "m", "the probe range")}
+    found = []
+    for key, (what, v, unit, name) in series.items():
+        if key not in lim:
+            continue
+        hit = v >= LIMIT_REACHED * lim[key]
+        for c in range(len(CHANNELS)):
+            share = float(np.mean(hit[:, c]))
+            if share >= FLAT_SHARE and np.sum(hit[:, c]) >= 5:
+                label = f"u_{CHANNELS[c]}" if what == "u" else (
+                    f"y_{CHANNELS[c]}" if what == "y" else f"du/dt of u_{CHANNELS[c]}")
+                found.append(f"{label} reaches {name} of the rig file ({lim[key]:g} {unit}, "
+                             f"limits.{key}) on {100 * share:.2g} % of the samples")
+    return found
+
+
 def at_extremes(x: NDArray) -> tuple[NDArray, NDArray]:
     """Masks of the samples of x at its maximum and at its minimum (within 1e-9 of its
     span)."""
@@ -283,10 +313,12 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
     limit; 'coil': the documented controller's command on the held samples), or None;
     shift: how far the coefficients moved when it was modelled."""
     flats = flat_tops(rec)
-    values: dict = {"flat_tops": flats, **(clip.to_dict() if clip is not None else {}),
+    hits = limit_hits(rec)
+    values: dict = {"flat_tops": flats, "rig_limits": hits,
+                    **(clip.to_dict() if clip is not None else {}),
                     "modelled": modelled,
                     "coefficient_shift": None if shift is None else [float(v) for v in shift]}
-    problems = list(flats)
+    problems = [*flats, *hits]
     if clip is not None and clip.found:
         problems.append(
             f"the residual follows the recorded current clipped at {clip.limit_a:.3g} A "
@@ -296,7 +328,9 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
     if not problems:
         tail = (f", and the residual does not follow a clipped current (z {clip.z:.1f})"
                 if clip is not None else "")
-        return Check("linearity", True, "linearity: no flat tops in u or y" + tail, values)
+        lims = (", no rig-file limit reached" if getattr(rec.rig, "limits", None) else "")
+        return Check("linearity", True, "linearity: no flat tops in u or y" + lims + tail,
+                     values)
     return Check("linearity", False,
                  "linearity: FAILED - " + "; ".join(problems) + ". The loop is not linear "
                  "here (an amplifier current limit or a probe at the end of its range): "

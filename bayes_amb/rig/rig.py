@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import math
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import Any
@@ -95,6 +95,9 @@ class Rig:
     c_ref: float
     k_ref: float
     source: str = "<built-in>"
+    limits: dict[str, float] = field(default_factory=dict)
+    """What the hardware cannot exceed, from the optional [limits] table (LIMIT_KEYS):
+    the linearity check fails on a record that reaches them."""
 
     @property
     def n_nodes(self) -> int:
@@ -133,13 +136,14 @@ class Rig:
             "damping": {"first_mode_zeta": self.first_mode_zeta},
             "operation": {"nominal_speed_rpm": self.nominal_speed_rpm},
             "uncertainty": {"c_ref": self.c_ref, "k_ref": self.k_ref},
+            **({"limits": dict(self.limits)} if self.limits else {}),
         }
 
 
 SHIPPED_RIGS = ("reference", "small_rotor")
 """Rig files shipped in bayes_amb/rig/data/, loadable by name."""
 _TOP_KEYS = {"name", "description", "shaft", "discs", "bearings", "sensors", "damping",
-             "operation", "uncertainty"}
+             "operation", "uncertainty", "limits"}
 _SHAFT_KEYS = {"youngs_modulus", "density", "poisson", "diameter", "length", "n_nodes"}
 _DISC_KEYS = {"name", "node", "mass", "ip", "id"}
 
@@ -262,12 +266,29 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
         raise r.fail(f"uncertainty.{bad[0]}", "unknown key (allowed: ['c_ref', 'k_ref'])")
     c_ref = r.number({"c_ref": 1000.0, **un}, "c_ref", "uncertainty.c_ref")
     k_ref = r.number({"k_ref": 1.0e5, **un}, "k_ref", "uncertainty.k_ref")
+    limits = _limits(r, data.get("limits", {}))
     desc = data.get("description", "")
     if not isinstance(desc, str):
         raise r.fail("description", f"expected a string, got {desc!r}")
     return Rig(name=name, description=desc, shaft=shaft, discs=tuple(discs), ki=ki, ks=ks,
                bearing_nodes=bearing_nodes, sensor_nodes=sensor_nodes, first_mode_zeta=zeta,
-               nominal_speed_rpm=speed, c_ref=c_ref, k_ref=k_ref, source=source)
+               nominal_speed_rpm=speed, c_ref=c_ref, k_ref=k_ref, source=source,
+               limits=limits)
+
+
+LIMIT_KEYS = {"current_a": "the largest control current the amplifiers deliver, |u| (A)",
+              "slew_a_per_s": "the amplifiers' largest current slew rate, |du/dt| (A/s)",
+              "sensor_range_m": "the probes' measuring range, |y| (m)"}
+"""The optional [limits] of a rig file (each a positive number, any subset)."""
+
+
+def _limits(r: Any, table: Any) -> dict[str, float]:
+    if not isinstance(table, dict):
+        raise r.fail("limits", f"expected a table, got {table!r}")
+    bad = sorted(set(table) - set(LIMIT_KEYS))
+    if bad:
+        raise r.fail(f"limits.{bad[0]}", f"unknown key (allowed: {sorted(LIMIT_KEYS)})")
+    return {k: r.number(table, k, f"limits.{k}") for k in LIMIT_KEYS if k in table}
 
 
 def load_rig(path: str | Path | None = None) -> Rig:
