@@ -41,6 +41,7 @@ from scipy.signal import lfilter
 
 from bayes_amb.control.discrete import ss_freqresp_modal, ss_response
 from bayes_amb.discrepancy.checks import Check
+from bayes_amb.discrepancy.detection_lines import detection_line_test
 from bayes_amb.discrepancy.locate import locate_bands
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import CHANNELS
@@ -314,11 +315,13 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
     shift: how far the coefficients moved when it was modelled."""
     flats = flat_tops(rec)
     hits = limit_hits(rec)
+    lines = detection_line_test(rec)
     values: dict = {"flat_tops": flats, "rig_limits": hits,
+                    "detection_lines": lines.to_dict(),
                     **(clip.to_dict() if clip is not None else {}),
                     "modelled": modelled,
                     "coefficient_shift": None if shift is None else [float(v) for v in shift]}
-    problems = [*flats, *hits]
+    problems = [*flats, *hits, *([lines.problem()] if lines.found else [])]
     if clip is not None and clip.found:
         problems.append(
             f"the residual follows the recorded current clipped at {clip.limit_a:.3g} A "
@@ -329,8 +332,11 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
         tail = (f", and the residual does not follow a clipped current (z {clip.z:.1f})"
                 if clip is not None else "")
         lims = (", no rig-file limit reached" if getattr(rec.rig, "limits", None) else "")
-        return Check("linearity", True, "linearity: no flat tops in u or y" + lims + tail,
-                     values)
+        odd = (", no odd distortion on the odd multisine's detection lines (largest "
+               f"odd/even power ratio {lines.worst['ratio']:.2f})"
+               if lines.design and lines.worst else "")
+        return Check("linearity", True,
+                     "linearity: no flat tops in u or y" + lims + odd + tail, values)
     return Check("linearity", False,
                  "linearity: FAILED - " + "; ".join(problems) + ". The loop is not linear "
                  "here (an amplifier current limit or a probe at the end of its range): "

@@ -12,7 +12,7 @@ from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
 
-EXCITATIONS = ("random-binary", "prbs", "multisine")
+EXCITATIONS = ("random-binary", "prbs", "multisine", "odd-multisine")
 
 
 def random_binary(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
@@ -57,17 +57,52 @@ def multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt:
     return amplitude * out
 
 
+def odd_multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt: float,
+                  band_hz: tuple[float, float] | None = None, group: int = 4) -> NDArray:
+    """Random-odd multisine (Pintelon & Schoukens 2012, ch. 4): only odd multiples of the
+    record's base frequency 1/(n dt) in band_hz, one odd line in each group of ``group``
+    left out at random (a detection line), flat amplitude, random phases per channel, peak
+    scaled to amplitude. A linear loop puts only noise on the left-out odd lines and on the
+    even ones alike; an odd nonlinearity (a clip, the magnetic force at large orbits) adds
+    distortion on the odd ones (discrepancy/detection_lines.py). Same default band as
+    :func:`multisine`."""
+    f0 = 1.0 / (n * dt)
+    lo, hi = (5.0, min(1000.0, 0.4 / dt)) if band_hz is None else band_hz
+    if not (0 < lo < hi <= 0.5 / dt):
+        raise BayesAmbError(f"multisine band {band_hz} Hz must satisfy 0 < lo < hi <= "
+                            f"Nyquist {0.5 / dt:g} Hz")
+    k0, k1 = int(np.ceil(lo / f0)), int(np.floor(hi / f0))
+    odd = np.arange(k0 + (k0 + 1) % 2, k1 + 1, 2)
+    keep = np.ones(odd.size, dtype=bool)
+    for g in range(0, odd.size, group):
+        keep[g + rng.integers(min(group, odd.size - g))] = False
+    k = odd[keep]
+    if k.size < 2:
+        raise BayesAmbError(f"odd multisine: the band {lo:g}-{hi:g} Hz holds too few odd "
+                            f"lines of the record's {f0:g} Hz grid")
+    t = np.arange(n) * dt
+    out = np.empty((n, n_ch))
+    for c in range(n_ch):
+        ph = rng.uniform(0, 2 * np.pi, k.size)
+        x = np.zeros(n)
+        for i in range(0, k.size, 256):                 # bounded memory (n x 256)
+            x += np.cos(2 * np.pi * f0 * np.outer(t, k[i:i + 256]) + ph[i:i + 256]).sum(axis=1)
+        out[:, c] = x / np.max(np.abs(x))
+    return amplitude * out
+
+
 def excitation(kind: str, n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
                dt: float, band_hz: tuple[float, float] | None = None) -> NDArray:
-    """Dispatch on the excitation name (random-binary, prbs, multisine; band_hz only for
-    multisine)."""
+    """Dispatch on the excitation name (random-binary, prbs, multisine, odd-multisine;
+    band_hz only for the multisines)."""
     if kind == "random-binary":
         return random_binary(n, n_ch, amplitude, rng)
     if kind == "prbs":
         return prbs(n, n_ch, amplitude, rng)
-    if kind == "multisine":
-        return multisine(n, n_ch, amplitude, rng, dt,
-                         None if band_hz is None else (float(band_hz[0]), float(band_hz[1])))
+    if kind in ("multisine", "odd-multisine"):
+        make = multisine if kind == "multisine" else odd_multisine
+        return make(n, n_ch, amplitude, rng, dt,
+                    None if band_hz is None else (float(band_hz[0]), float(band_hz[1])))
     raise BayesAmbError(f"option --excitation: unknown value {kind!r}; known: "
                         f"{', '.join(EXCITATIONS)}")
 
