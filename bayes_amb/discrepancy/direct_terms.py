@@ -66,5 +66,6 @@ def averaged(named: NDArray, nominal: NDArray, n_theta: int) -> NDArray:
     posteriors (the first n_theta columns; the named model's own parameters stay its
     draws)."""
     other = named.copy()
-    other[:, :n_theta] = nominal[:named.shape[0], :n_theta]
+    rows = np.arange(named.shape[0]) % nominal.shape[0]    # emcee runs differ in length
+    other[:, :n_theta] = nominal[rows, :n_theta]
     return np.concatenate([named, other])

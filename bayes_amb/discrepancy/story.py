@@ -119,6 +119,17 @@ def plain_language(report: dict[str, Any]) -> str:
                                      for k, v in e["params"].items())
                          + f"; log Bayes factor {e['score']:.1f})" for e in expl)
         text.append(f"Added to the model: {what}.")
+        direct = report.get("direct_terms") or []
+        if direct:
+            text.append("Beside it, the direct stiffness and damping " + "; ".join(
+                f"at {d['location']} (K [{d['params']['K']['hdi90'][0]:.3g}, "
+                f"{d['params']['K']['hdi90'][1]:.3g}] N/m, C "
+                f"[{d['params']['C']['hdi90'][0]:.3g}, {d['params']['C']['hdi90'][1]:.3g}] "
+                "N s/m)" for d in direct) + " were fitted, as a seal or impeller has them, "
+                "so that the bearing coefficients do not take them.")
+        if report.get("parameters_after_from", "").endswith("tentative"):
+            text.append("The coefficients after are averaged with the nominal model's, since "
+                        "the naming is tentative.")
         swaps = _swaps(report.get("candidates", []))
         if swaps:
             text.append(swaps)

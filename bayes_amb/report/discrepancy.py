@@ -90,7 +90,19 @@ def discrepancy_section(run: RunData) -> Section:
               + (" (prior bound)" if pa[n].get("at_prior_bound") else ""), _hdi(pa[n]),
               g(truth.get(n)) if n in truth else "–"] for n in pb],
             "A MAP on a prior bound means the data pushed the parameter against its range: "
-            "with the nominal model it often absorbs the missing physics."))
+            "with the nominal model it often absorbs the missing physics."
+            + (f" After: from {dg['parameters_after_from']}."
+               if dg.get("parameters_after_from") else "")))
+    direct = dg.get("direct_terms") or []
+    if direct:
+        tables.append(Table("Direct terms beside a cross-coupling at a node", [
+            "location", "K (N/m): mean", "K: 90 % HDI", "C (N s/m): mean", "C: 90 % HDI"],
+            [[d["location"], g(d["params"]["K"]["mean"]), _hdi(d["params"]["K"]),
+              g(d["params"]["C"]["mean"]), _hdi(d["params"]["C"])] for d in direct],
+            "A seal's or impeller's force has direct stiffness and damping beside its "
+            "cross-coupled stiffness; they are fitted so that the bearing coefficients do not "
+            "take them. Between the bearings they are hard to tell from the bearings' own k "
+            "and c: the coefficients' intervals widen where they cannot be told apart."))
     cands = dg.get("candidates", [])
     greedy = [c for c in cands if c["round"] != "revisit"]
     if greedy:
