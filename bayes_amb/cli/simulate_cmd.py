@@ -52,6 +52,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--band", default=None, metavar="LO,HI", help="multisine band, Hz, "
                    "0 < LO < HI <= Nyquist (default 5 Hz to min(1 kHz, 0.8 Nyquist)); a "
                    "narrow band informs only a combination of parameters")
+    p.add_argument("--channels", default=None, metavar="CH,...",
+                   help="excited channels, e.g. Bx or Ax,By (default: all four)")
     p.add_argument("--r1-rms", type=real(0, unit="m"), default=0.0, metavar="M",
                    help="sensor-side disturbance r1, RMS in m, >= 0 (default 0)")
     p.add_argument("--r2-rms", type=real(0, unit="A"), default=0.0, metavar="A",
@@ -113,7 +115,9 @@ def run(args: argparse.Namespace) -> int:
                            noise_rms=args.noise_rms, r1_rms=args.r1_rms, r2_rms=args.r2_rms,
                            r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz,
                            duration=args.duration, dt=args.dt, speed_rpm=args.speed_rpm,
-                           seed=args.seed, port=args.port)
+                           seed=args.seed, port=args.port,
+                           channels=(None if args.channels is None else
+                                     tuple(c.strip() for c in args.channels.split(","))))
     cfg.validate()                          # the options first, before any expensive work
     rig = load_rig(args.rig)
     if args.controller:

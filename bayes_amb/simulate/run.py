@@ -15,7 +15,7 @@ from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.controller_file import ControllerFile, check_fits_rig
 from bayes_amb.io.recording import Recording, make_recording
-from bayes_amb.rig import Rig, check_speed_rpm
+from bayes_amb.rig import CHANNELS, Rig, check_speed_rpm
 from bayes_amb.simulate.effects import Effect
 from bayes_amb.simulate.loop import simulate_loop
 from bayes_amb.simulate.signals import excitation, gaussian_noise
@@ -57,6 +57,8 @@ class SimulationConfig:
     speed_rpm: float | None = None
     seed: int = 0
     port: str | None = None
+    channels: tuple[str, ...] | None = None
+    """The excited channels (of Ax, Ay, Bx, By; None: all four); the others get none."""
 
     def validate(self) -> None:
         if not (np.isfinite(self.amplitude) and self.amplitude > 0):
@@ -96,6 +98,11 @@ class SimulationConfig:
                 raise BayesAmbError(f"option --band: value {band[0]:g},{band[1]:g} out of "
                                     f"range: must be 0 < LO < HI <= {0.5 / self.dt:g} Hz "
                                     "(Nyquist)")
+        if self.channels is not None and (not self.channels or
+                                          not set(self.channels) <= set(CHANNELS)
+                                          or len(set(self.channels)) != len(self.channels)):
+            raise BayesAmbError(f"option --channels: value {','.join(self.channels)!r} "
+                                f"must name distinct channels of {','.join(CHANNELS)}")
         if self.port not in (None, "eta", "r2"):
             raise BayesAmbError(f"option --port: value {self.port!r} not one of eta, r2")
         if not 0 <= self.seed < 2**32:
@@ -135,6 +142,8 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
     streams = np.random.default_rng(config.seed).spawn(4)
     exc = excitation(config.excitation, n, 4, config.amplitude, streams[0], config.dt,
                      config.excitation_band_hz)
+    if config.channels is not None:
+        exc[:, [c not in config.channels for c in CHANNELS]] = 0.0
     noise = gaussian_noise(n, 4, config.noise_rms, streams[1], config.dt)
     r1 = gaussian_noise(n, 4, config.r1_rms, streams[2], config.dt, config.r1_band_hz)
     r2 = gaussian_noise(n, 4, config.r2_rms, streams[3], config.dt, config.r2_band_hz)

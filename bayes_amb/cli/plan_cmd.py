@@ -1,0 +1,99 @@
+"""`bayes-amb plan`: the posterior sd a test will give, before it is run (issue 30)."""
+
+from __future__ import annotations
+
+import argparse
+
+from bayes_amb.cli.common import emit
+from bayes_amb.cli.options import real, seed
+from bayes_amb.cli.simulate_cmd import parse_assignments, parse_band
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.io.controller_file import load_controller
+from bayes_amb.io.recording import load_recording
+from bayes_amb.plan import Design, Noise, plan
+from bayes_amb.plan.plan import noise_from
+from bayes_amb.rig import load_rig
+from bayes_amb.simulate import EXCITATIONS
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("plan", help="predict what a test will tell before it is run",
+                       description="Predict the posterior sd that identify will report on a "
+                       "record of the given design, from the Fisher information of its "
+                       "likelihood (first order; seconds, no study). The noise is given "
+                       "(--noise-rms, --r1-rms, --r2-rms and their bands) or fitted on an "
+                       "earlier recording (--noise-from, which also gives the rig, "
+                       "controller and speed).")
+    p.add_argument("--rig", default=None, metavar="FILE",
+                   help="rig TOML file (default: the reference rig)")
+    p.add_argument("--controller", default=None, metavar="FILE", help="controller JSON "
+                   "(default: the reference controller designed for the rig and --dt)")
+    p.add_argument("--noise-from", default=None, metavar="REC.csv",
+                   help="take the noise, rig, controller and speed from an earlier recording "
+                   "(its noise intensities as identify fits them)")
+    p.add_argument("--excitation", choices=EXCITATIONS, default="random-binary",
+                   help="excitation signal (default random-binary)")
+    p.add_argument("--amplitude", type=real(0, lo_open=True, unit="A"), default=0.5,
+                   metavar="A", help="excitation amplitude, A (default 0.5)")
+    p.add_argument("--band", default=None, metavar="LO,HI",
+                   help="multisine band, Hz (default 5 Hz to min(1 kHz, 0.8 Nyquist))")
+    p.add_argument("--channels", default=None, metavar="CH,...",
+                   help="excited channels, e.g. Bx or Ax,By (default: all four)")
+    p.add_argument("--duration", type=real(0, 600, lo_open=True, unit="s"), default=2.0,
+                   metavar="S", help="record length, s (default 2)")
+    p.add_argument("--dt", type=real(0, 0.01, lo_open=True, unit="s"), default=1e-4,
+                   metavar="S", help="sample time, s (default 1e-4)")
+    p.add_argument("--port", choices=("eta", "r2"), default=None,
+                   help="where the excitation enters (default: eta for an observer "
+                   "controller, r2 otherwise)")
+    p.add_argument("--noise-rms", type=real(0, unit="m"), default=5e-8, metavar="M",
+                   help="sensor noise RMS, m (default 5e-8)")
+    p.add_argument("--r1-rms", type=real(0, unit="m"), default=0.0, metavar="M",
+                   help="sensor-side disturbance RMS, m (default 0)")
+    p.add_argument("--r2-rms", type=real(0, unit="A"), default=0.0, metavar="A",
+                   help="actuator-side (force) disturbance RMS, A (default 0)")
+    p.add_argument("--r1-band-hz", type=real(0, lo_open=True, unit="Hz"), default=None,
+                   metavar="HZ", help="low-pass band of r1, Hz (default: white)")
+    p.add_argument("--r2-band-hz", type=real(0, lo_open=True, unit="Hz"), default=None,
+                   metavar="HZ", help="low-pass band of r2, Hz (default: white)")
+    p.add_argument("--params", default=None, metavar="NAMES",
+                   help="parameters, comma-separated (default: the eight bearing "
+                   "coefficients)")
+    p.add_argument("--set", action="append", default=[], metavar="NAME=THETA",
+                   help="parameter value the prediction is made at (default 0: nominal)")
+    p.add_argument("--speed-rpm", type=real(0, unit="rpm"), default=None, metavar="RPM",
+                   help="rotor speed, rpm (default: the rig's nominal)")
+    p.add_argument("--seed", type=seed, default=0, help="seed of the design's excitation "
+                   "(default 0)")
+    p.add_argument("--json", action="store_true", help="print JSON (default: a table)")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    design = Design(excitation=args.excitation, amplitude=args.amplitude,
+                    band_hz=parse_band(args.band),
+                    channels=(None if args.channels is None else
+                              tuple(c.strip() for c in args.channels.split(","))),
+                    duration=args.duration, dt=args.dt, port=args.port)
+    speed = args.speed_rpm
+    if args.noise_from:
+        rec = load_recording(args.noise_from)
+        rig, ctrl, noise = rec.rig, rec.controller, noise_from(rec)
+        speed = rec.speed_rpm if speed is None else speed
+        design = Design(**{**design.__dict__, "dt": rec.dt})
+    else:
+        rig = load_rig(args.rig)
+        ctrl = (load_controller(args.controller) if args.controller else
+                export_controller(reference_controller(rig, args.dt, speed), rig))
+        noise = Noise(noise_rms=args.noise_rms, r1_rms=args.r1_rms, r2_rms=args.r2_rms,
+                      r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz)
+    result = plan(rig, ctrl, design, noise, args.params, parse_assignments(args.set), speed,
+                  seed=args.seed)
+    d = result.to_dict()
+    head = (f"plan: {design.excitation} {design.amplitude:g} A on "
+            f"{','.join(design.channels or ('Ax', 'Ay', 'Bx', 'By'))}, {design.duration:g} s "
+            f"at dt {design.dt:g} s; noise {noise.noise_rms:.3g} m, r1 {noise.r1_rms:.3g} m, "
+            f"r2 {noise.r2_rms:.3g} A; predicted posterior sd (first order, "
+            f"{result.n_bins} bins up to {result.f_max_hz:.0f} Hz):")
+    emit(d, head + "\n" + result.table(), args.json)
+    return 0

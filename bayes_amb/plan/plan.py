@@ -1,0 +1,215 @@
+"""``plan``: what a test will tell before it is run (issue 30).
+
+A design (excitation, amplitude, band, channels, duration, sample time) and the noise the
+rig has (given, or fitted on an earlier recording) give the Fisher information of the
+Whittle likelihood (fisher.py), and from it the posterior sd each parameter will have, in
+the units identify reports. Checked against studies (README, Test design).
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field, replace
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy import signal as sps
+
+from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.priors import Prior, PriorSet
+from bayes_amb.io.controller_file import ControllerFile
+from bayes_amb.io.recording import Recording
+from bayes_amb.plan.fisher import Information, fisher_information, log10_sigma_of
+from bayes_amb.rig import Rig
+from bayes_amb.simulate import SimulationConfig, simulate_recording
+from bayes_amb.uncertainty import get_spec, parse_param_list
+
+BEARING_COEFFICIENTS = tuple(f"{g}_{b}{a}" for g in "kc" for b in "AB" for a in "xy")
+
+NOT_INFORMED = 0.5
+"""A predicted sd above this share of the prior sd: the record will not inform the
+parameter, its posterior stays near the prior, and the first-order prediction does not
+hold there."""
+
+
+@dataclass(frozen=True)
+class Design:
+    """A test: excitation kind (random-binary, prbs, multisine, odd-multisine), amplitude
+    (A) on the excited ``channels`` (None: all four), multisine ``band_hz``, ``duration``
+    (s), ``dt`` (s), excitation ``port`` (None: eta for an observer controller, else r2)."""
+
+    excitation: str = "random-binary"
+    amplitude: float = 0.5
+    band_hz: tuple[float, float] | None = None
+    channels: tuple[str, ...] | None = None
+    duration: float = 2.0
+    dt: float = 1e-4
+    port: str | None = None
+
+
+@dataclass(frozen=True)
+class Noise:
+    """The rig's noise: sensor noise (m RMS, white), sensor-side r1 (m) and actuator-side
+    r2 (A) RMS, each white or low-pass band-limited (``*_band_hz``, 4th-order Butterworth,
+    as ``simulate`` makes it)."""
+
+    noise_rms: float = 5e-8
+    r1_rms: float = 0.0
+    r2_rms: float = 0.0
+    r1_band_hz: float | None = None
+    r2_band_hz: float | None = None
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The prediction for one design: per parameter the posterior sd (theta units and
+    physical), the prior sd, and whether the record will inform it."""
+
+    design: Design
+    noise: Noise
+    speed_rpm: float
+    parameters: dict[str, dict[str, Any]]
+    f_max_hz: float
+    n_bins: int
+    notes: list[str] = field(default_factory=list)
+
+    def sd(self, name: str) -> float:
+        return float(self.parameters[name]["sd"])
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": "bayes-amb-plan/1", "design": asdict(self.design),
+                "noise": asdict(self.noise), "speed_rpm": self.speed_rpm,
+                "parameters": self.parameters, "f_max_hz": self.f_max_hz,
+                "n_bins": self.n_bins, "notes": self.notes,
+                "method": "first-order (Fisher information of the Whittle likelihood)"}
+
+    def table(self) -> str:
+        """The prediction as a text table."""
+        lines = [f"{'parameter':<10} {'sd (theta)':>11} {'sd (physical)':>16} "
+                 f"{'prior sd':>9}  informed"]
+        for n, v in self.parameters.items():
+            lines.append(f"{n:<10} {v['sd']:>11.3g} {v['physical_sd']:>12.3g} {v['unit']:<4}"
+                         f"{v['prior_sd']:>9.3g}  {'yes' if v['informed'] else 'NO'}")
+        return "\n".join(lines + self.notes)
+
+
+def _band_gain(band_hz: float | None, f: NDArray, dt: float) -> NDArray:
+    """Power gain of simulate's band-limiting at f (mean 1 over the band to Nyquist)."""
+    if band_hz is None:
+        return np.ones_like(f)
+    if not 0 < band_hz < 0.5 / dt:
+        raise BayesAmbError(f"disturbance bandwidth {band_hz} Hz must lie below Nyquist "
+                            f"{0.5 / dt:g} Hz")
+    sos = sps.butter(4, band_hz, fs=1.0 / dt, output="sos")
+    grid = np.linspace(0, 0.5 / dt, 4097)
+    _, h_grid = sps.sosfreqz(sos, worN=grid, fs=1.0 / dt)
+    _, h = sps.sosfreqz(sos, worN=f, fs=1.0 / dt)
+    return np.abs(h) ** 2 / np.mean(np.abs(h_grid) ** 2)
+
+
+def design_recording(rig: Rig, controller: ControllerFile, design: Design,
+                     noise: Noise, speed_rpm: float | None = None,
+                     theta: dict[str, float] | None = None, seed: int = 0
+                     ) -> tuple[Recording, SimulationConfig]:
+    """A recording of the design on the reduced model (its excitation is what the
+    information is computed from; its noise sets only the likelihood's scale)."""
+    cfg = SimulationConfig(truth="reduced", params=dict(theta or {}),
+                           excitation=design.excitation, amplitude=design.amplitude,
+                           excitation_band_hz=design.band_hz, channels=design.channels,
+                           noise_rms=noise.noise_rms, r1_rms=noise.r1_rms,
+                           r2_rms=noise.r2_rms, r1_band_hz=noise.r1_band_hz,
+                           r2_band_hz=noise.r2_band_hz, duration=design.duration,
+                           dt=design.dt, speed_rpm=speed_rpm, seed=seed, port=design.port)
+    cfg.validate()
+    rec, _ = simulate_recording(rig, controller, cfg)
+    return rec, cfg
+
+
+def information(rig: Rig, controller: ControllerFile, design: Design, noise: Noise,
+                params: tuple[str, ...], theta: NDArray, speed_rpm: float | None = None,
+                seed: int = 0) -> Information:
+    """The Fisher information of the design about params at theta (fisher.py), with the
+    band-limited sources' spectra taken as they are."""
+    rec, _ = design_recording(rig, controller, design, noise, speed_rpm,
+                              dict(zip(params, theta, strict=True)), seed)
+    ls = log10_sigma_of(noise.noise_rms, noise.r1_rms, noise.r2_rms)
+    if noise.r1_band_hz is None and noise.r2_band_hz is None:
+        return fisher_information(rec, params, theta, ls)
+    return fisher_information(rec, params, theta, ls,
+                              source_gain=lambda f: np.stack(
+                                  [np.ones_like(f), _band_gain(noise.r1_band_hz, f, design.dt),
+                                   _band_gain(noise.r2_band_hz, f, design.dt)]))
+
+
+def _prior_sd(prior: Prior) -> float:
+    if prior.kind == "uniform":
+        return (prior.b - prior.a) / np.sqrt(12.0)
+    if prior.kind == "normal":
+        return prior.b
+    return float("inf")
+
+
+def predicted_parameters(info: Information, rig: Rig,
+                         priors: dict[str, Prior] | None = None) -> dict[str, dict[str, Any]]:
+    """Per parameter: the predicted posterior sd (the priors' curvature added: a normal
+    prior's 1/sd^2), in theta units and physical, the prior sd and whether informed."""
+    ps = PriorSet.build(info.names, priors)
+    P = np.diag([1.0 / pr.b ** 2 if pr.kind == "normal" else 0.0 for pr in ps.priors])
+    try:
+        cov = np.linalg.inv(info.F + P)
+        sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    except np.linalg.LinAlgError:
+        sd = np.full(len(info.names), np.inf)
+    out = {}
+    for n, s, pr in zip(info.names, sd, ps.priors, strict=True):
+        spec = get_spec(n)
+        prior_sd = _prior_sd(pr)
+        informed = bool(np.isfinite(s) and s <= NOT_INFORMED * prior_sd)
+        out[n] = {"sd": float(s), "physical_sd": float(s * abs(spec.physical_scale(rig))),
+                  "unit": spec.unit, "prior_sd": float(prior_sd), "informed": informed}
+    return out
+
+
+def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
+         noise: Noise | None = None, params: str | tuple[str, ...] | None = None,
+         theta: dict[str, float] | None = None, speed_rpm: float | None = None,
+         priors: dict[str, Prior] | None = None, seed: int = 0) -> Plan:
+    """Predict the posterior sd of ``params`` (default: the eight bearing coefficients)
+    that identify will report on a record of ``design`` with the rig's ``noise``, at the
+    parameter values ``theta`` (default: nominal, every theta 0)."""
+    design = design or Design()
+    noise = noise or Noise()
+    names = parse_param_list(",".join(BEARING_COEFFICIENTS) if params is None else params)
+    th = np.array([(theta or {}).get(n, 0.0) for n in names], dtype=float)
+    extra = sorted(set(theta or {}) - set(names))
+    if extra:
+        raise BayesAmbError(f"option --set: {extra[0]} is not among the planned parameters "
+                            f"{list(names)}")
+    info = information(rig, controller, design, noise, names, th, speed_rpm, seed)
+    pars = predicted_parameters(info, rig, priors)
+    notes = []
+    weak = [n for n, v in pars.items() if not v["informed"]]
+    if weak:
+        notes.append(f"not informed: {', '.join(weak)} (predicted sd above {NOT_INFORMED:g} x "
+                     "the prior sd): their posterior will stay near the prior, where this "
+                     "first-order prediction does not hold; excite more, longer, or in the "
+                     "band they act in")
+    speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
+    return Plan(design=design, noise=noise, speed_rpm=speed, parameters=pars,
+                f_max_hz=info.f_max_hz, n_bins=info.n_bins, notes=notes)
+
+
+def noise_from(recording: Recording) -> Noise:
+    """The noise intensities identify fits on an earlier recording (its MAP of the eight
+    bearing coefficients and the three white sources; no sampling, no adequacy test)."""
+    from bayes_amb.inference.identify import IdentifyOptions, identify
+    res = identify(recording, BEARING_COEFFICIENTS,
+                   options=IdentifyOptions(map_only=True, adequacy=False))
+    m = res.summary["noise"]["map"]
+    return Noise(noise_rms=m["sigma_noise"]["value"], r1_rms=m["sigma_r1"]["value"],
+                 r2_rms=m["sigma_r2"]["value"])
+
+
+def with_duration(design: Design, duration: float) -> Design:
+    """The same design with another record length."""
+    return replace(design, duration=float(duration))

@@ -1,0 +1,109 @@
+"""Issue 30: the plan's predicted posterior sd against studies.
+
+For each design, ``bayes_amb.plan.plan`` predicts the sd of the eight bearing coefficients;
+N recordings of that design (the tool's own simulator, reduced truth, the given noise,
+seeds 1000..) are identified (MAP with its Laplace approximation, the user's defaults
+otherwise), and the prediction is compared with the empirical sd of the posterior means
+and with the mean posterior sd. Rows are appended to OUT/rows.jsonl (a run resumes);
+OUT/summary.md and OUT/summary.json hold the table.
+
+    python studies/plan_check.py --out runs/plan --n 50
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.plan import Design, Noise, plan
+from bayes_amb.plan.plan import BEARING_COEFFICIENTS, design_recording
+from bayes_amb.rig import load_rig
+
+DESIGNS = {
+    "white": (Design(duration=1.0), Noise(noise_rms=5e-8)),
+    "force_disturbance": (Design(duration=1.0),
+                          Noise(noise_rms=5e-8, r2_rms=0.02, r2_band_hz=150.0)),
+    "one_channel": (Design(duration=1.0, channels=("Bx",)), Noise(noise_rms=5e-8)),
+}
+"""The designs of the Done-when: white noise, a band-limited force disturbance (r2, 20 mA
+RMS below 150 Hz: the rigid-body band), excitation on one channel."""
+
+TOLERANCE = 0.25
+
+
+def run(out: Path, n: int, designs: list[str]) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    rows_path = out / "rows.jsonl"
+    rows = [json.loads(line) for line in rows_path.read_text().splitlines()] \
+        if rows_path.is_file() else []
+    done = {(r["design"], r["seed"]) for r in rows}
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    summary = {}
+    for name in designs:
+        design, noise = DESIGNS[name]
+        t0 = time.perf_counter()
+        pred = plan(rig, ctrl, design, noise)
+        plan_s = time.perf_counter() - t0
+        for i in range(n):
+            seed = 1000 + i
+            if (name, seed) in done:
+                continue
+            rec, _ = design_recording(rig, ctrl, design, noise, seed=seed)
+            res = identify(rec, BEARING_COEFFICIENTS, options=IdentifyOptions(map_only=True))
+            par = res.summary["parameters"]
+            row = {"design": name, "seed": seed,
+                   "mean": {k: par[k]["mean"] for k in BEARING_COEFFICIENTS},
+                   "sd": {k: par[k]["sd"] for k in BEARING_COEFFICIENTS}}
+            rows.append(row)
+            with rows_path.open("a") as f:
+                f.write(json.dumps(row) + "\n")
+        mine = [r for r in rows if r["design"] == name][:n]
+        table = {}
+        for k in BEARING_COEFFICIENTS:
+            means = np.array([r["mean"][k] for r in mine])
+            sds = np.array([r["sd"][k] for r in mine])
+            p = pred.sd(k)
+            table[k] = {"predicted_sd": p, "empirical_sd_of_means": float(np.std(means, ddof=1)),
+                        "mean_posterior_sd": float(np.mean(sds)),
+                        "ratio_empirical": float(np.std(means, ddof=1) / p),
+                        "ratio_posterior": float(np.mean(sds) / p)}
+        ok = all(abs(v["ratio_empirical"] - 1) <= TOLERANCE
+                 and abs(v["ratio_posterior"] - 1) <= TOLERANCE for v in table.values())
+        summary[name] = {"n": len(mine), "plan_s": plan_s, "within_25_percent": ok,
+                         "parameters": table}
+    write_text_atomic(out / "summary.json", json.dumps(summary, indent=1) + "\n")
+    lines = ["| design | n | parameter | predicted sd | empirical sd of means (ratio) | "
+             "mean posterior sd (ratio) |", "|---|---|---|---|---|---|"]
+    for name, s in summary.items():
+        for k, v in s["parameters"].items():
+            lines.append(f"| {name} | {s['n']} | {k} | {v['predicted_sd']:.3g} | "
+                         f"{v['empirical_sd_of_means']:.3g} ({v['ratio_empirical']:.2f}) | "
+                         f"{v['mean_posterior_sd']:.3g} ({v['ratio_posterior']:.2f}) |")
+    write_text_atomic(out / "summary.md", "\n".join(lines) + "\n")
+    return summary
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--n", type=int, default=50)
+    ap.add_argument("--designs", default=",".join(DESIGNS))
+    a = ap.parse_args()
+    s = run(a.out, a.n, a.designs.split(","))
+    for name, v in s.items():
+        worst = max(max(abs(p["ratio_empirical"] - 1), abs(p["ratio_posterior"] - 1))
+                    for p in v["parameters"].values())
+        print(f"{name}: n {v['n']}, plan {v['plan_s']:.2f} s, worst ratio off by "
+              f"{100 * worst:.0f} %, within 25 %: {v['within_25_percent']}")
+
+
+if __name__ == "__main__":
+    main()
