@@ -91,12 +91,53 @@ def run(out: Path, n: int, designs: list[str]) -> dict:
     return summary
 
 
+def check_optimised(out: Path, targets: dict[str, float], n: int) -> dict:
+    """The optimised design (plan.optimise) and the default random binary at the length
+    the plan says each needs for ``targets``: n records of each identified, the achieved
+    mean posterior sd and the sd of the means against the targets."""
+    from bayes_amb.plan.optimise import optimise
+    out.mkdir(parents=True, exist_ok=True)
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    noise = Noise(noise_rms=5e-8)
+    t0 = time.perf_counter()
+    o = optimise(rig, ctrl, targets, noise)
+    opt_s = time.perf_counter() - t0
+    default = Design(duration=float(np.ceil(o.default_s * 100) / 100))
+    result = {"targets": targets, "optimise_s": opt_s, "gain": default.duration /
+              o.design.duration, "designs": {}}
+    for label, design in (("optimised", o.design), ("default", default)):
+        means, sds = [], []
+        for i in range(n):
+            rec, _ = design_recording(rig, ctrl, design, noise, seed=2000 + i)
+            res = identify(rec, tuple(targets), options=IdentifyOptions(map_only=True))
+            par = res.summary["parameters"]
+            means.append([par[k]["mean"] for k in targets])
+            sds.append([par[k]["sd"] for k in targets])
+        means, sds = np.array(means), np.array(sds)
+        result["designs"][label] = {
+            "design": {"excitation": design.excitation, "band_hz": design.band_hz,
+                       "channels": design.channels, "duration_s": design.duration},
+            "parameters": {k: {"target": t, "mean_posterior_sd": float(sds[:, j].mean()),
+                               "empirical_sd_of_means": float(np.std(means[:, j], ddof=1))}
+                           for j, (k, t) in enumerate(targets.items())}}
+    write_text_atomic(out / "optimised.json", json.dumps(result, indent=1) + "\n")
+    return result
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--n", type=int, default=50)
     ap.add_argument("--designs", default=",".join(DESIGNS))
+    ap.add_argument("--target", default=None, metavar="NAME=SD,...",
+                    help="check the optimised design for these targets instead")
     a = ap.parse_args()
+    if a.target:
+        targets = {k: float(v) for k, v in (t.split("=") for t in a.target.split(","))}
+        r = check_optimised(a.out, targets, a.n)
+        print(json.dumps(r, indent=1))
+        return
     s = run(a.out, a.n, a.designs.split(","))
     for name, v in s.items():
         worst = max(max(abs(p["ratio_empirical"] - 1), abs(p["ratio_posterior"] - 1))

@@ -141,7 +141,8 @@ BAD = [
     (["--speed-rpm", "1e5"], "option --speed-rpm: value 100000 out of range: must be in "
      "0..63000 rpm$"),
     (["-o", "{missing_dir}/x.csv"], "error: {missing_dir}/x.csv: No such file or directory$"),
-    (["--band", "10,20"], "option --band: only the multisine excitations have a band"),
+    (["--excitation", "prbs", "--band", "10,20"],
+     "option --band: only the multisine and random-binary excitations have a band"),
     (["--excitation", "multisine", "--band", "20,10"],
      r"option --band: value 20,10 out of range: must be 0 < LO < HI <= 500 Hz \(Nyquist\)$"),
     (["--excitation", "multisine", "--band", "10"], "option --band: expected LO,HI in Hz"),

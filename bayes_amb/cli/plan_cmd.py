@@ -4,13 +4,17 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
+
 from bayes_amb.cli.common import emit
 from bayes_amb.cli.options import real, seed
 from bayes_amb.cli.simulate_cmd import parse_assignments, parse_band
 from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.controller_file import load_controller
 from bayes_amb.io.recording import load_recording
 from bayes_amb.plan import Design, Noise, plan
+from bayes_amb.plan.optimise import optimise
 from bayes_amb.plan.plan import noise_from
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import EXCITATIONS
@@ -63,6 +67,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="parameter value the prediction is made at (default 0: nominal)")
     p.add_argument("--speed-rpm", type=real(0, unit="rpm"), default=None, metavar="RPM",
                    help="rotor speed, rpm (default: the rig's nominal)")
+    p.add_argument("--target", action="append", default=[], metavar="NAME=SD",
+                   help="target posterior sd in theta units, e.g. k_By=0.005 (repeatable): "
+                   "find the shortest design that reaches every target within the rig "
+                   "file's [limits] (excitation kind, band and channels; --amplitude is the "
+                   "amplitude used)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the design's excitation "
                    "(default 0)")
     p.add_argument("--json", action="store_true", help="print JSON (default: a table)")
@@ -87,6 +96,8 @@ def run(args: argparse.Namespace) -> int:
                 export_controller(reference_controller(rig, args.dt, speed), rig))
         noise = Noise(noise_rms=args.noise_rms, r1_rms=args.r1_rms, r2_rms=args.r2_rms,
                       r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz)
+    if args.target:
+        return _optimise(args, rig, ctrl, design, noise, speed)
     result = plan(rig, ctrl, design, noise, args.params, parse_assignments(args.set), speed,
                   seed=args.seed)
     d = result.to_dict()
@@ -97,3 +108,40 @@ def run(args: argparse.Namespace) -> int:
             f"{result.n_bins} bins up to {result.f_max_hz:.0f} Hz):")
     emit(d, head + "\n" + result.table(), args.json)
     return 0
+
+
+def _optimise(args: argparse.Namespace, rig, ctrl, design: Design, noise: Noise,
+              speed: float | None) -> int:
+    targets = parse_targets(args.target)
+    o = optimise(rig, ctrl, targets, noise, design, speed, seed=args.seed)
+    d = o.design
+    def band_of(r):
+        return "-" if r["band_hz"] is None else f"{r['band_hz'][0]:g}-{r['band_hz'][1]:g} Hz"
+
+    rows = [f"  {r['excitation']:<13} {band_of(r):<15} "
+            f"{','.join(r['channels']):<12} {r['duration_s']:>8.2f} s  "
+            f"peak {r['peak_current_a']:.2f} A, {r['peak_displacement_m'] * 1e6:.1f} um"
+            + (f"  REFUSED: {r['refused']}" if r["refused"] else "") for r in o.candidates]
+    goal = ", ".join(f"{k} sd {v:g}" for k, v in targets.items())
+    band = "" if d.band_hz is None else f" band {d.band_hz[0]:g}-{d.band_hz[1]:g} Hz"
+    text = (f"plan: the shortest design reaching {goal}: {d.excitation}{band}"
+            f" {d.amplitude:g} A on {','.join(d.channels or ('Ax', 'Ay', 'Bx', 'By'))}, "
+            f"{d.duration:g} s (the default random binary needs {o.default_s:.2f} s: "
+            f"{o.gain:.1f}x longer)\n{o.plan.table()}\ncandidates (length that reaches the "
+            "targets):\n" + "\n".join(rows))
+    emit(o.to_dict(), text, args.json)
+    return 0
+
+
+def parse_targets(items: list[str]) -> dict[str, float]:
+    """['k_By=0.005'] -> {'k_By': 0.005}."""
+    out = {}
+    for it in items:
+        name, eq, val = it.partition("=")
+        try:
+            out[name.strip()] = float(val) if eq else float("nan")
+        except ValueError:
+            out[name.strip()] = float("nan")
+        if not eq or not np.isfinite(out[name.strip()]):
+            raise BayesAmbError(f"option --target: expected NAME=SD with a number, got {it!r}")
+    return out

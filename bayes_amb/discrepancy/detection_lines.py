@@ -19,6 +19,7 @@ below ALPHA / (the number of tests) and R >= MIN_RATIO (a distortion an engineer
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -98,7 +99,7 @@ def detection_line_test(rec: Recording) -> DetectionLines:
     tests = []
     for g, v in (("y", rec.y), ("u", rec.u)):
         Z = np.abs(np.fft.rfft(np.asarray(v, dtype=float), axis=0)) ** 2
-        for a, b in zip(edges[:-1], edges[1:], strict=True):
+        for a, b in itertools.pairwise(edges):
             lo_b = left[(f[left] >= a) & (f[left] < b)]
             ev_b = even[(f[even] >= a) & (f[even] < b)]
             if lo_b.size < MIN_LINES or ev_b.size < MIN_LINES:

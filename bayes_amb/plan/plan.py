@@ -127,11 +127,12 @@ def design_recording(rig: Rig, controller: ControllerFile, design: Design,
 
 def information(rig: Rig, controller: ControllerFile, design: Design, noise: Noise,
                 params: tuple[str, ...], theta: NDArray, speed_rpm: float | None = None,
-                seed: int = 0) -> Information:
+                seed: int = 0, recording: Recording | None = None) -> Information:
     """The Fisher information of the design about params at theta (fisher.py), with the
-    band-limited sources' spectra taken as they are."""
-    rec, _ = design_recording(rig, controller, design, noise, speed_rpm,
-                              dict(zip(params, theta, strict=True)), seed)
+    band-limited sources' spectra taken as they are; ``recording`` the design's record if
+    already simulated (at theta)."""
+    rec = recording or design_recording(rig, controller, design, noise, speed_rpm,
+                                        dict(zip(params, theta, strict=True)), seed)[0]
     ls = log10_sigma_of(noise.noise_rms, noise.r1_rms, noise.r2_rms)
     if noise.r1_band_hz is None and noise.r2_band_hz is None:
         return fisher_information(rec, params, theta, ls)

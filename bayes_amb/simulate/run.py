@@ -90,8 +90,9 @@ class SimulationConfig:
                                     "be in -0.95..0.95")
         if self.excitation_band_hz is not None:
             band = self.excitation_band_hz
-            if self.excitation not in ("multisine", "odd-multisine"):
-                raise BayesAmbError(f"option --band: only the multisine excitations have a band "
+            if self.excitation not in ("multisine", "odd-multisine", "random-binary"):
+                raise BayesAmbError(f"option --band: only the multisine and random-binary "
+                                    f"excitations have a band "
                                     f"(excitation is {self.excitation!r})")
             if not (len(band) == 2 and all(np.isfinite(band))
                     and 0 < band[0] < band[1] <= 0.5 / self.dt):

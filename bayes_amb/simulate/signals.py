@@ -91,12 +91,22 @@ def odd_multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
     return amplitude * out
 
 
+def binary_hold(band_hz: tuple[float, float] | None, dt: float) -> int:
+    """Samples each level of a random binary is held for so that its first spectral null,
+    1 / (hold dt), is at or above the band's upper edge: hold = floor(1 / (hi dt)) (1
+    without a band). Holding puts the signal's power below the null: a band-limited random
+    binary at the same peak current."""
+    if band_hz is None:
+        return 1
+    return max(1, int(np.floor(1.0 / (band_hz[1] * dt) + 1e-9)))
+
+
 def excitation(kind: str, n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
                dt: float, band_hz: tuple[float, float] | None = None) -> NDArray:
     """Dispatch on the excitation name (random-binary, prbs, multisine, odd-multisine;
-    band_hz only for the multisines)."""
+    band_hz for the multisines, and for random-binary its upper edge sets the hold)."""
     if kind == "random-binary":
-        return random_binary(n, n_ch, amplitude, rng)
+        return random_binary(n, n_ch, amplitude, rng, binary_hold(band_hz, dt))
     if kind == "prbs":
         return prbs(n, n_ch, amplitude, rng)
     if kind in ("multisine", "odd-multisine"):

@@ -1,0 +1,73 @@
+"""Issue 30: bayes-amb plan predicts the posterior sd of a design before it is run.
+
+The prediction is first order (Fisher information of identify's likelihood); its checks
+against studies of 50 records per design are studies/plan_check.py (README). Here: the
+laws it must obey exactly (information grows with record length and with the square of
+the amplitude when the sensor noise dominates) and one identification beside it."""
+
+import json
+
+import numpy as np
+import pytest
+
+from bayes_amb.control.export import export_controller, reference_controller
+from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.plan import Design, Noise, plan
+from bayes_amb.plan.plan import BEARING_COEFFICIENTS, design_recording
+from bayes_amb.rig import load_rig
+from tests.helpers import run_cli
+
+
+@pytest.fixture(scope="module")
+def rig_ctrl():
+    rig = load_rig()
+    return rig, export_controller(reference_controller(rig, 1e-4), rig)
+
+
+@pytest.fixture(scope="module")
+def base(rig_ctrl):
+    return plan(*rig_ctrl, Design(duration=1.0), Noise(noise_rms=5e-8))
+
+
+def test_information_grows_with_length_and_amplitude(rig_ctrl, base):
+    """sd ~ 1/sqrt(duration) (twice the bins, same spectra) and ~ 1/amplitude (the
+    noise does not depend on the excitation), to 5 % (leakage and band edges)."""
+    longer = plan(*rig_ctrl, Design(duration=2.0), Noise(noise_rms=5e-8))
+    louder = plan(*rig_ctrl, Design(duration=1.0, amplitude=1.0), Noise(noise_rms=5e-8))
+    for n in BEARING_COEFFICIENTS:
+        assert longer.sd(n) / base.sd(n) == pytest.approx(1 / np.sqrt(2), rel=0.05)
+        assert louder.sd(n) / base.sd(n) == pytest.approx(0.5, rel=0.05)
+        assert base.parameters[n]["informed"]
+
+
+def test_one_channel_and_a_force_disturbance_cost_precision(rig_ctrl, base):
+    one = plan(*rig_ctrl, Design(duration=1.0, channels=("Bx",)), Noise(noise_rms=5e-8))
+    assert one.sd("k_Bx") < 1.5 * base.sd("k_Bx")
+    assert all(one.sd(n) > 5 * base.sd(n) for n in ("k_Ax", "k_Ay", "k_By"))
+    force = plan(*rig_ctrl, Design(duration=1.0),
+                 Noise(noise_rms=5e-8, r2_rms=0.02, r2_band_hz=150.0))
+    assert all(force.sd(n) > 3 * base.sd(n) for n in BEARING_COEFFICIENTS)
+
+
+def test_the_prediction_is_the_posterior_sd_identify_reports(rig_ctrl, base):
+    """One record: identify's Laplace sd is within 30 % of the predicted one. A record's
+    observed curvature and fitted noise differ from the expected ones (measured ratios
+    0.99-1.27 on seeds 7 and 8); the mean over records, and the spread of the estimates,
+    are the study's (studies/plan_check.py: within 25 %)."""
+    rec, _ = design_recording(*rig_ctrl, Design(duration=1.0), Noise(noise_rms=5e-8),
+                              seed=7)
+    res = identify(rec, BEARING_COEFFICIENTS,
+                   options=IdentifyOptions(map_only=True, adequacy=False))
+    for n in BEARING_COEFFICIENTS:
+        assert res.summary["parameters"][n]["sd"] / base.sd(n) == pytest.approx(1, abs=0.3)
+
+
+def test_plan_cli(capsys):
+    code, out, _ = run_cli(["plan", "--duration", "0.5", "--params", "k_By,c_By", "--json"],
+                           capsys)
+    assert code == 0
+    d = json.loads(out)
+    assert set(d["parameters"]) == {"k_By", "c_By"} and d["format"] == "bayes-amb-plan/1"
+    assert d["parameters"]["k_By"]["sd"] > 0
+    code, _, err = run_cli(["plan", "--channels", "Cx"], capsys)
+    assert code == 2 and "option --channels" in err
