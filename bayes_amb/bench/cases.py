@@ -370,10 +370,18 @@ def bench_diagnose(quick: bool = False) -> Result:
     return run(quick)
 
 
+def bench_plan(quick: bool = False) -> Result:
+    """The plan of the eight coefficients against the study it replaces
+    (bayes_amb.bench.plan_case)."""
+    from bayes_amb.bench.plan_case import bench_plan as run
+
+    return run(quick)
+
+
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
     "simulate": bench_simulate, "map": bench_map, "diagnose": bench_diagnose,
-    "cli": bench_cli, "study": bench_study}
+    "cli": bench_cli, "study": bench_study, "plan": bench_plan}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
 """What ``bayes-amb bench`` runs without --only (the diagnosis, the CLI runs and the study

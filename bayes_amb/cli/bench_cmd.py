@@ -19,7 +19,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        + ", ".join(DEFAULT_BENCHMARKS) + ") takes about 1.5 minutes; "
                        "'--only cli' (a README command in subprocesses with and without "
                        "OPENBLAS_NUM_THREADS=1) about 2; '--only study' (1000-replicate study "
-                       "throughput) about 5. BLAS threads are limited by the tool itself "
+                       "throughput) about 5; '--only plan' (the plan against one identification) "
+                       "under 1. BLAS threads are limited by the tool itself "
                        "(--threads, BAYES_AMB_THREADS).")
     p.add_argument("--only", default=None, metavar="NAME,...",
                    help="comma-separated benchmarks to run, of " + ", ".join(BENCHMARKS)
@@ -81,6 +82,11 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         r = d["cli"]
         rows.append(("cli", f"{r['default_s']:.1f} s without the variable",
                      f"{r['variable_s']:.1f} s with it", f"{r['ratio']:.2f}"))
+    if "plan" in d:
+        r = d["plan"]
+        rows.append(("plan", f"{r['plan_s']:.2f} s (target {r['requirement_s']:g} s)",
+                     f"{r['study_s']:.0f} s: 50 identifications of {r['identify_s']:.1f} s",
+                     f"{r['speedup']:.0f}x"))
     if "study" in d:
         r = d["study"]
         rows.append(("study", f"{r['n_replicates']} replicates in {r['wall_s']:.0f} s "
