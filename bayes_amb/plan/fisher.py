@@ -22,6 +22,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy.optimize import minimize
 
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
@@ -35,8 +36,13 @@ STEP = 1e-4
 
 @dataclass(frozen=True)
 class Information:
-    """F (p, p) about ``names`` at ``theta`` for the noise ``log10_sigma``; ``n_bins`` the
-    frequency bins that enter, ``f_max_hz`` the top of the band."""
+    """What a design tells about ``names`` at ``theta``: F (p, p), the curvature of
+    identify's likelihood (its Laplace precision); B (p, p), the variance of its score
+    under the true noise (B = F when the noise is white, as the likelihood models it, so
+    that the spread of the estimates is F^-1; else F^-1 B F^-1); ``log10_sigma`` the true
+    white-equivalent intensities and ``log10_sigma_model`` the white ones identify fits
+    (the same when the sources are white); ``n_bins`` the frequency bins that enter,
+    ``f_max_hz`` the top of the band."""
 
     names: tuple[str, ...]
     theta: NDArray
@@ -44,6 +50,8 @@ class Information:
     F: NDArray
     n_bins: int
     f_max_hz: float
+    B: NDArray | None = None
+    log10_sigma_model: NDArray | None = None
 
 
 def log10_sigma_of(noise_rms: float, r1_rms: float, r2_rms: float) -> NDArray:
@@ -79,12 +87,42 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     if not np.all(stable):
         raise ValueError("the controller does not stabilise the model next to theta")
     J = np.stack([(R[2 * j] - R[2 * j + 1]) / (2 * STEP) for j in range(p)], axis=-1)
-    if source_gain is None:
-        W_band = like.curvature_weights(theta, log10_sigma)            # (n_bands, 4, 4)
-    else:
-        g = source_gain(like.band_freq_hz) * 10.0 ** (2 * log10_sigma)[:, None]
-        W_band = np.linalg.inv(np.einsum("sb,sbcd->bcd", g, like.phi_sources) * like.n)
-    W = W_band[np.repeat(np.arange(like.starts.size), like.counts)]
-    F = 2 * np.einsum("kci,kcd,kdj->ij", J.conj(), W, J).real
+    nb = like.starts.size
+    sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
+    gain = np.ones((3, nb)) if source_gain is None else source_gain(like.band_freq_hz)
+    phi_true = _spectrum(like, gain * sig2[:, None])
+    ls_model = (np.asarray(log10_sigma, dtype=float) if source_gain is None
+                else white_fit(like, phi_true, log10_sigma))
+    phi_model = _spectrum(like, np.repeat(10.0 ** (2 * ls_model)[:, None], nb, axis=1))
+    W_band = np.linalg.inv(phi_model)                                   # (n_bands, 4, 4)
+    band = np.repeat(np.arange(nb), like.counts)
+    WJ = np.einsum("kcd,kdj->kcj", W_band[band], J)
+    F = 2 * np.einsum("kci,kcj->ij", J.conj(), WJ).real
+    B = 2 * np.einsum("kci,kcd,kdj->ij", WJ.conj(), phi_true[band], WJ).real
     return Information(tuple(names), theta, np.asarray(log10_sigma, dtype=float),
-                       0.5 * (F + F.T), int(like.k.size), like.f_max_hz)
+                       0.5 * (F + F.T), int(like.k.size), like.f_max_hz,
+                       B=0.5 * (B + B.T), log10_sigma_model=ls_model)
+
+
+def _spectrum(like: WhittleLikelihood, sig2_band: NDArray) -> NDArray:
+    """N Phi_b (n_bands, 4, 4) from per-band source intensities (3, n_bands)."""
+    return np.einsum("sb,sbcd->bcd", sig2_band, like.phi_sources) * like.n
+
+
+def white_fit(like: WhittleLikelihood, phi_true: NDArray, start: NDArray) -> NDArray:
+    """The white intensities (log10) identify's likelihood converges to on data of true
+    spectrum phi_true: the minimum over sigma of the expected negative log-likelihood,
+    sum_b n_b [log det Phi_b(sigma) + tr(Phi_b(sigma)^-1 Phi_true,b)] (Whittle's KL)."""
+    nb = like.starts.size
+    bounds = list(NOISE_LOG10_BOUNDS.values())
+
+    def loss(ls: NDArray) -> float:
+        phi = _spectrum(like, np.repeat(10.0 ** (2 * ls)[:, None], nb, axis=1))
+        _, logdet = np.linalg.slogdet(phi)
+        tr = np.einsum("bcd,bdc->b", np.linalg.inv(phi), phi_true).real
+        return float(np.sum(like.counts * (logdet + tr)))
+
+    x0 = np.clip(np.asarray(start, dtype=float), [b[0] for b in bounds],
+                 [b[1] for b in bounds])
+    res = minimize(loss, x0, method="L-BFGS-B", bounds=bounds)
+    return np.asarray(res.x, dtype=float)

@@ -86,10 +86,11 @@ class Plan:
     def table(self) -> str:
         """The prediction as a text table."""
         lines = [f"{'parameter':<10} {'sd (theta)':>11} {'sd (physical)':>16} "
-                 f"{'prior sd':>9}  informed"]
+                 f"{'spread':>9} {'prior sd':>9}  informed"]
         for n, v in self.parameters.items():
             lines.append(f"{n:<10} {v['sd']:>11.3g} {v['physical_sd']:>12.3g} {v['unit']:<4}"
-                         f"{v['prior_sd']:>9.3g}  {'yes' if v['informed'] else 'NO'}")
+                         f"{v['sd_of_estimates']:>9.3g} {v['prior_sd']:>9.3g}  "
+                         f"{'yes' if v['informed'] else 'NO'}")
         return "\n".join(lines + self.notes)
 
 
@@ -156,18 +157,21 @@ def predicted_parameters(info: Information, rig: Rig,
     prior's 1/sd^2), in theta units and physical, the prior sd and whether informed."""
     ps = PriorSet.build(info.names, priors)
     P = np.diag([1.0 / pr.b ** 2 if pr.kind == "normal" else 0.0 for pr in ps.priors])
+    B = info.F if info.B is None else info.B
     try:
         cov = np.linalg.inv(info.F + P)
         sd = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        spread = np.sqrt(np.clip(np.diag(cov @ B @ cov), 0.0, None))
     except np.linalg.LinAlgError:
-        sd = np.full(len(info.names), np.inf)
+        sd = spread = np.full(len(info.names), np.inf)
     out = {}
-    for n, s, pr in zip(info.names, sd, ps.priors, strict=True):
+    for n, s, e, pr in zip(info.names, sd, spread, ps.priors, strict=True):
         spec = get_spec(n)
         prior_sd = _prior_sd(pr)
         informed = bool(np.isfinite(s) and s <= NOT_INFORMED * prior_sd)
         out[n] = {"sd": float(s), "physical_sd": float(s * abs(spec.physical_scale(rig))),
-                  "unit": spec.unit, "prior_sd": float(prior_sd), "informed": informed}
+                  "sd_of_estimates": float(e), "unit": spec.unit, "prior_sd": float(prior_sd),
+                  "informed": informed}
     return out
 
 
@@ -195,6 +199,11 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
                      "the prior sd): their posterior will stay near the prior, where this "
                      "first-order prediction does not hold; excite more, longer, or in the "
                      "band they act in")
+    over = max(v["sd_of_estimates"] / v["sd"] for v in pars.values())
+    if over > 1.25:
+        notes.append(f"the noise is not white, as identify's likelihood has it: its intervals "
+                     f"will be narrower than the spread of its estimates, by up to {over:.2f}x "
+                     "(sd_of_estimates against sd)")
     speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
     return Plan(design=design, noise=noise, speed_rpm=speed, parameters=pars,
                 f_max_hz=info.f_max_hz, n_bins=info.n_bins, notes=notes)
