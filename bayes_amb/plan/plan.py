@@ -27,9 +27,9 @@ from bayes_amb.uncertainty import get_spec, parse_param_list
 BEARING_COEFFICIENTS = tuple(f"{g}_{b}{a}" for g in "kc" for b in "AB" for a in "xy")
 
 NOT_INFORMED = 0.5
-"""A predicted sd above this share of the prior sd: the record will not inform the
-parameter, its posterior stays near the prior, and the first-order prediction does not
-hold there."""
+"""A predicted sd (or spread of the estimates) above this share of the prior sd: the
+record will not inform the parameter, its posterior stays near the prior, and the
+first-order prediction does not hold there."""
 
 
 @dataclass(frozen=True)
@@ -168,7 +168,7 @@ def predicted_parameters(info: Information, rig: Rig,
     for n, s, e, pr in zip(info.names, sd, spread, ps.priors, strict=True):
         spec = get_spec(n)
         prior_sd = _prior_sd(pr)
-        informed = bool(np.isfinite(s) and s <= NOT_INFORMED * prior_sd)
+        informed = bool(np.isfinite(s) and max(s, e) <= NOT_INFORMED * prior_sd)
         out[n] = {"sd": float(s), "physical_sd": float(s * abs(spec.physical_scale(rig))),
                   "sd_of_estimates": float(e), "unit": spec.unit, "prior_sd": float(prior_sd),
                   "informed": informed}
