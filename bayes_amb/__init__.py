@@ -6,3 +6,34 @@ rig -> rotor (FE model, eq. 17) -> reduction (eqs. 18-45) -> uncertainty (LFT, e
 """
 
 __version__ = "0.1.0"
+
+# The top-level API, imported on first use (PEP 562): ``import bayes_amb`` stays light, so
+# that the CLI can limit the BLAS threads before numpy is loaded (bayes_amb.threads).
+_API = {
+    "load_rig": "bayes_amb.rig",
+    "load_recording": "bayes_amb.io.recording",
+    "load_controller": "bayes_amb.io.controller_file",
+    "SimulationConfig": "bayes_amb.simulate",
+    "simulate_recording": "bayes_amb.simulate",
+    "identify": "bayes_amb.inference.identify",
+    "IdentifyOptions": "bayes_amb.inference.identify",
+    "diagnose": "bayes_amb.discrepancy.diagnose",
+    "DiagnoseOptions": "bayes_amb.discrepancy.diagnose",
+    "plan": "bayes_amb.planning",
+    "Design": "bayes_amb.planning",
+    "Noise": "bayes_amb.planning",
+}
+
+__all__ = ["__version__", *_API]
+
+
+def __getattr__(name: str):
+    if name in _API:
+        import importlib
+
+        return getattr(importlib.import_module(_API[name]), name)
+    raise AttributeError(f"module 'bayes_amb' has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(__all__)

@@ -1,14 +1,16 @@
 """Issue 30: the plan's predicted posterior sd against studies.
 
-For each design, ``bayes_amb.plan.plan`` predicts the sd of the eight bearing coefficients;
-N recordings of that design (the tool's own simulator, reduced truth, the given noise,
-seeds 1000..) are identified (MAP with its Laplace approximation; without the adequacy
-test, which on a reduced truth leaves the intervals as they are and doubles the time), and the predictions are compared: the posterior sd with the mean posterior sd,
+For each design, ``bayes_amb.planning.plan`` predicts the sd of the eight bearing
+coefficients; N recordings of that design (the tool's own simulator, reduced truth, the
+given noise, seeds 1000..) are identified (MAP with its Laplace approximation; without
+the adequacy test, which on a reduced truth leaves the intervals as they are and doubles
+the time), and the predictions are compared: the posterior sd with the mean posterior sd,
 and the spread of the estimates (the sandwich F^-1 B F^-1 when the noise is not white as
-the likelihood has it) with the empirical sd of the posterior means. Rows are appended to OUT/rows.jsonl (a run resumes);
-OUT/summary.md and OUT/summary.json hold the table.
+the likelihood has it) with the empirical sd of the posterior means. Rows are appended to
+OUT/rows.jsonl (a run resumes); OUT/summary.md and OUT/summary.json hold the table.
 
-    python studies/plan_check.py --out runs/plan --n 50
+    python studies/plan_check.py --out runs/plan --n 100
+    python studies/plan_check.py --out runs/plan_opt --n 50 --target k_By=0.0004,c_By=0.002
 """
 
 from __future__ import annotations
@@ -23,8 +25,8 @@ import numpy as np
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.io.atomic import write_text_atomic
-from bayes_amb.plan import Design, Noise, plan
-from bayes_amb.plan.plan import BEARING_COEFFICIENTS, design_recording
+from bayes_amb.planning import Design, Noise, plan
+from bayes_amb.planning.plan import BEARING_COEFFICIENTS, design_recording
 from bayes_amb.rig import load_rig
 
 DESIGNS = {
@@ -106,7 +108,7 @@ def check_optimised(out: Path, targets: dict[str, float], n: int) -> dict:
     """The optimised design (plan.optimise) and the default random binary at the length
     the plan says each needs for ``targets``: n records of each identified, the achieved
     mean posterior sd and the sd of the means against the targets."""
-    from bayes_amb.plan.optimise import optimise
+    from bayes_amb.planning.optimise import optimise
     out.mkdir(parents=True, exist_ok=True)
     rig = load_rig()
     ctrl = export_controller(reference_controller(rig, 1e-4), rig)

@@ -12,8 +12,8 @@ import pytest
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.inference.identify import IdentifyOptions, identify
-from bayes_amb.plan import Design, Noise, plan
-from bayes_amb.plan.plan import BEARING_COEFFICIENTS, design_recording
+from bayes_amb.planning import Design, Noise, plan
+from bayes_amb.planning.plan import BEARING_COEFFICIENTS, design_recording
 from bayes_amb.rig import load_rig
 from tests.helpers import run_cli
 

@@ -35,8 +35,8 @@ class PlanBench(Result):
 def bench_plan(quick: bool = False) -> PlanBench:
     from bayes_amb.control.export import export_controller, reference_controller
     from bayes_amb.inference.identify import IdentifyOptions, identify
-    from bayes_amb.plan import Design, Noise, plan
-    from bayes_amb.plan.plan import BEARING_COEFFICIENTS, design_recording
+    from bayes_amb.planning import Design, Noise, plan
+    from bayes_amb.planning.plan import BEARING_COEFFICIENTS, design_recording
     from bayes_amb.rig import load_rig
 
     design, noise = Design(duration=0.5 if quick else 2.0), Noise(noise_rms=5e-8)

@@ -13,9 +13,9 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.controller_file import load_controller
 from bayes_amb.io.recording import load_recording
-from bayes_amb.plan import Design, Noise, plan
-from bayes_amb.plan.optimise import optimise
-from bayes_amb.plan.plan import noise_from
+from bayes_amb.planning import Design, Noise, plan
+from bayes_amb.planning.optimise import optimise
+from bayes_amb.planning.plan import noise_from
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import EXCITATIONS
 

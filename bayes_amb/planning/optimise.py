@@ -20,7 +20,7 @@ import numpy as np
 
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.controller_file import ControllerFile
-from bayes_amb.plan.plan import (
+from bayes_amb.planning.plan import (
     Design,
     Noise,
     Plan,

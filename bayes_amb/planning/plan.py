@@ -19,7 +19,7 @@ from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.io.controller_file import ControllerFile
 from bayes_amb.io.recording import Recording
-from bayes_amb.plan.fisher import Information, fisher_information, log10_sigma_of
+from bayes_amb.planning.fisher import Information, fisher_information, log10_sigma_of
 from bayes_amb.rig import Rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 from bayes_amb.uncertainty import get_spec, parse_param_list

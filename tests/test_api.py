@@ -1,0 +1,30 @@
+"""The top-level API (issue 31): ``from bayes_amb import identify, diagnose, plan, ...``,
+imported on first use so that ``import bayes_amb`` loads no numpy (the CLI limits the
+BLAS threads before numpy is loaded)."""
+
+import subprocess
+import sys
+
+import bayes_amb
+
+
+def test_import_is_light():
+    code = "import sys, bayes_amb; print('numpy' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True).stdout.strip()
+    assert out == "False"
+
+
+def test_every_name_of_the_api_resolves():
+    for name in bayes_amb.__all__:
+        assert getattr(bayes_amb, name) is not None
+    from bayes_amb import diagnose, identify, plan
+    assert identify.__module__ == "bayes_amb.inference.identify"
+    assert diagnose.__module__ == "bayes_amb.discrepancy.diagnose"
+    assert plan.__module__ == "bayes_amb.planning.plan"
+    try:
+        bayes_amb.nothing_here  # noqa: B018
+    except AttributeError as exc:
+        assert "nothing_here" in str(exc)
+    else:
+        raise AssertionError("an unknown name must raise AttributeError")
