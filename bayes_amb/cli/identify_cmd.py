@@ -14,6 +14,7 @@ from bayes_amb.cli.common import (
     to_jsonable,
 )
 from bayes_amb.cli.options import integer, seed
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.io.recording import load_recording
 
@@ -23,7 +24,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        description="Fit S(theta) to a closed-loop recording: MAP, then an "
                        "emcee posterior run to 50 autocorrelation times. Writes "
                        "RUN_DIR/posterior.nc and RUN_DIR/summary.json.")
-    p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
+    p.add_argument("recording", metavar="NAME.csv", nargs="+",
+                   help="the recording (NAME.json beside it); several give one joint "
+                   "posterior of the shared coefficients (each record's own noise, speed, "
+                   "controller and dt; MAP with Laplace approximation)")
+    p.add_argument("--per-record", default="", metavar="NAMES",
+                   help="with several recordings: parameters estimated per record, e.g. "
+                   "c_Ax (reported as c_Ax@1, c_Ax@2, ...) (default: none, all shared)")
     add_rig_option(p)
     p.add_argument("--params", required=True, metavar="NAMES",
                    help="comma-separated parameter names, e.g. k_By,c_By (required; names: "
@@ -93,9 +100,43 @@ def format_summary(s: dict) -> str:
     return "\n".join(lines)
 
 
+def format_joint(s: dict) -> str:
+    lines = [f"Joint identification of {len(s['recordings'])} recordings ({s['inference']}, "
+             f"{'converged' if s['converged'] else 'NOT converged'}, {s['wall_s']:.1f} s)",
+             f"{'param':<9} {'mean':>9} {'sd':>9} {'90% HDI':>21} {'physical mean':>16}"]
+    for n, v in s["parameters"].items():
+        lo, hi = v["hdi90"]
+        lines.append(f"{n:<9} {v['mean']:>9.4f} {v['sd']:>9.3g} [{lo:>8.4f}, {hi:>8.4f}] "
+                     f"{v['physical_mean']:>11.4g} {v['unit']}")
+    for i, r in enumerate(s["records"], 1):
+        noise = ", ".join(f"{k} {v['value']:.3g} {v['unit']}" for k, v in r["noise"].items())
+        lines.append(f"record {i}: {r['recording']}, {r['speed_rpm']:g} rpm, dt {r['dt']:g} s; "
+                     f"noise {noise}")
+    lines.append(f"adequacy: {s['adequacy']['line']}")
+    return "\n".join(lines)
+
+
+def _run_joint(args: argparse.Namespace, priors) -> int:
+    from bayes_amb.inference.joint import identify_joint
+    recs = [load_recording(r) for r in args.recording]
+    for rec in recs:
+        check_rig_option(args, rec)
+    per = tuple(n.strip() for n in args.per_record.split(",") if n.strip())
+    result = identify_joint(recs, args.params, priors, IdentifyOptions(
+        map_only=True, map_method=args.map_method, seed=args.seed), per_record=per)
+    result.save(args.out)
+    summary = to_jsonable(result.summary)
+    emit(summary, format_joint(summary) + f"\nwrote {args.out}/summary.json", args.json)
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     priors = read_priors(args)
-    rec = load_recording(args.recording)
+    if len(args.recording) > 1:
+        return _run_joint(args, priors)
+    if args.per_record:
+        raise BayesAmbError("option --per-record: needs several recordings")
+    rec = load_recording(args.recording[0])
     check_rig_option(args, rec)
     update, bar = _progress_bar(not (args.no_progress or args.json or args.map_only))
     try:

@@ -34,9 +34,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "(default: the reference controller designed for the rig and --dt)")
     p.add_argument("--noise-from", default=None, metavar="REC.csv",
                    help="take the noise, rig, controller and speed from an earlier recording "
-                   "(its noise intensities as identify fits them)")
+                   "(its noise intensities as identify fits them) (default: none, the noise "
+                   "options are used)")
     p.add_argument("--excitation", choices=EXCITATIONS, default="random-binary",
-                   help="excitation signal (default random-binary)")
+                   help=f"excitation signal, one of {', '.join(EXCITATIONS)} "
+                   "(default random-binary)")
     p.add_argument("--amplitude", type=real(0, lo_open=True, unit="A"), default=0.5,
                    metavar="A", help="excitation amplitude, A (default 0.5)")
     p.add_argument("--band", default=None, metavar="LO,HI",
@@ -71,7 +73,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="target posterior sd in theta units, e.g. k_By=0.005 (repeatable): "
                    "find the shortest design that reaches every target within the rig "
                    "file's [limits] (excitation kind, band and channels; --amplitude is the "
-                   "amplitude used)")
+                   "amplitude used) (default: none, predict the given design)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the design's excitation "
                    "(default 0)")
     p.add_argument("--json", action="store_true", help="print JSON (default: a table)")
