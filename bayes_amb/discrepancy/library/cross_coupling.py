@@ -54,7 +54,8 @@ ENTRY = EffectEntry(
     fingerprint=("x-y coupling at one location: the residual of one axis is driven by the "
                  "excitation of the other, with opposite signs (forward/backward whirl "
                  "asymmetry)"),
-    side="plant", locations=LOCATIONS, scan="n1 .. n<number of nodes> (any shaft node)",
+    side="plant", locations=(*LOCATIONS, "n20"),       # n20: the reference rig's mid span
+    scan="n1 .. n<number of nodes> (any shaft node)",
     rig_locations=lambda rig: (*LOCATIONS, mid_span(rig)),
     sampled=(Sampled("kxy_{location}", Prior("uniform", -10.0, 10.0), 0.0, "-",
                      "kxy / k_ref"),),

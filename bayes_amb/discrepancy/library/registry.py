@@ -121,7 +121,7 @@ def node_scan(names: tuple[str, ...] | list[str], n_nodes: int,
     screens each such scan with one linearisation (family.py).
 
     >>> len(node_scan(["unbalance", "cross_coupling"], 40, all_candidates()))
-    77
+    76
     """
     keys = {c.key for c in have}
     out = []
