@@ -1,7 +1,7 @@
 # bayes_amb: everything a fresh clone needs, from nothing.
 #   make demo   - create .venv (Python >= 3.12), install, compile the numba kernels once
 #                 (python -m bayes_amb.warmup), run the end-to-end demo
-#   make test   - same set-up, then the default test suite
+#   make test   - same set-up, then the default test suite (2 processes, pytest-xdist)
 #   make bench  - the benchmarks (ratios against a baseline run side by side)
 # BLAS threads: the tool limits them itself (bayes_amb/threads.py; BAYES_AMB_THREADS=N).
 SHELL := /bin/bash
@@ -29,7 +29,7 @@ demo: $(STAMP)
 	$(VENV)/bin/bayes-amb demo
 
 test: $(STAMP)
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n 2
 
 bench: $(STAMP)
 	$(VENV)/bin/bayes-amb bench
