@@ -1,0 +1,73 @@
+"""Issue 30: the plan on the foreign generator's records.
+
+For each effect-free foreign record of a benchmark run (studies/foreign_benchmark.py with
+--identify), the plan is made as a user with that rig would make it: the record's rig,
+controller, speed and dt, its excitation (a random binary of the record's amplitude at its
+port, its length), and the noise intensities identify fitted on it (`--noise-from`). The
+predicted posterior sd is compared with the sd identify reported on that record, and the
+estimates' errors (truth read only here) with the predicted spread.
+
+    PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from bayes_amb.io.recording import load_recording
+from bayes_amb.planning import Design, Noise, plan
+from bayes_amb.planning.plan import BEARING_COEFFICIENTS
+
+
+def check(run: Path, kinds: list[str]) -> dict:
+    rows = []
+    for ident in sorted((run / "identify").glob("*.json")):
+        name = ident.stem
+        if name.rsplit("_", 1)[0] not in kinds:
+            continue
+        s = json.loads(ident.read_text())
+        rec = load_recording(run / "recordings" / f"{name}.csv")
+        x = next(iter(rec.excitation.values()))
+        n = s["noise"]["map"]
+        design = Design(excitation="random-binary", amplitude=float(np.max(np.abs(x))),
+                        duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"])
+        noise = Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
+                      r2_rms=n["sigma_r2"]["value"])
+        p = plan(rec.rig, rec.controller, design, noise, speed_rpm=rec.speed_rpm)
+        truth = json.loads((run / "recordings" / f"{name}.truth.json").read_text())["theta"]
+        par = s.get("parameters_model_only", s["parameters"])
+        if any(par[k]["sd"] is None for k in BEARING_COEFFICIENTS):
+            continue                        # identify's Laplace failed on this record
+        rows.append({"name": name, **{k: {
+            "predicted_sd": p.sd(k), "reported_sd": par[k]["sd"],
+            "z": (par[k]["mean"] - truth[k]) / p.parameters[k]["sd_of_estimates"]}
+            for k in BEARING_COEFFICIENTS}})
+    out = {"n": len(rows), "rows": rows, "parameters": {}}
+    for k in BEARING_COEFFICIENTS:
+        ratio = np.array([r[k]["reported_sd"] / r[k]["predicted_sd"] for r in rows])
+        z = np.array([r[k]["z"] for r in rows])
+        out["parameters"][k] = {"median_ratio": float(np.median(ratio)),
+                                "ratio_range": [float(ratio.min()), float(ratio.max())],
+                                "sd_of_z": float(np.std(z, ddof=1))}
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("run", type=Path)
+    ap.add_argument("--kinds", default="control")
+    a = ap.parse_args()
+    r = check(a.run, a.kinds.split(","))
+    print(f"{r['n']} records")
+    for k, v in r["parameters"].items():
+        print(f"{k}: reported / predicted sd median {v['median_ratio']:.2f} "
+              f"(range {v['ratio_range'][0]:.2f}-{v['ratio_range'][1]:.2f}), sd of "
+              f"(estimate - truth) / predicted spread {v['sd_of_z']:.2f}")
+
+
+if __name__ == "__main__":
+    main()
