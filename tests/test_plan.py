@@ -71,3 +71,23 @@ def test_plan_cli(capsys):
     assert d["parameters"]["k_By"]["sd"] > 0
     code, _, err = run_cli(["plan", "--channels", "Cx"], capsys)
     assert code == 2 and "option --channels" in err
+
+
+def test_detectability_matches_the_diagnosis(rig_ctrl):
+    """The expected log Bayes factor of a 0.4 % sensor gain on By (2 s, 50 nm) is the one
+    the diagnosis finds on a record of it, within the scatter the noise gives it
+    (sqrt(2 Q)): measured 42.7 +- 9.8 predicted, 50.7 found."""
+    from bayes_amb.discrepancy import diagnose
+    from bayes_amb.planning.detect import detectability
+    from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
+    e = parse_effect("sensor_gain:gain=0.004,channel=By")
+    r = detectability(*rig_ctrl, Design(duration=2.0), Noise(noise_rms=5e-8), e)
+    assert r["detected"] and r["probability_detected"] > 0.99
+    rec, _ = simulate_recording(*rig_ctrl, SimulationConfig(
+        truth="reduced", effects=(e,), noise_rms=5e-8, duration=2.0, seed=5))
+    found = diagnose(rec).report["explanations"]
+    assert [(x["effect"], x["location"]) for x in found] == [("sensor_gain", "By")]
+    assert abs(found[0]["score"] - r["expected_log_bayes_factor"]) < 3 * r["scatter_of_log_bf"]
+    weak = detectability(*rig_ctrl, Design(duration=2.0), Noise(noise_rms=5e-8),
+                         parse_effect("sensor_gain:gain=0.0005,channel=By"))
+    assert not weak["detected"] and weak["probability_detected"] < 0.1

@@ -74,6 +74,13 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "find the shortest design that reaches every target within the rig "
                    "file's [limits] (excitation kind, band and channels; --amplitude is the "
                    "amplitude used) (default: none, predict the given design)")
+    p.add_argument("--effect", action="append", default=[], metavar="NAME[:k=v,...]",
+                   help="a hidden effect whose detectability to predict, as simulate "
+                   "takes it, e.g. actuator_lag:bandwidth_hz=2000 (repeatable; of "
+                   "actuator_lag, time_delay, cross_coupling, sensor_gain) (default: none)")
+    p.add_argument("--smallest", action="store_true",
+                   help="with --effect: also search the weakest detectable size (about 15 s "
+                   "per effect) (default: off)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the design's excitation "
                    "(default 0)")
     p.add_argument("--json", action="store_true", help="print JSON (default: a table)")
@@ -103,13 +110,48 @@ def run(args: argparse.Namespace) -> int:
     result = plan(rig, ctrl, design, noise, args.params, parse_assignments(args.set), speed,
                   seed=args.seed)
     d = result.to_dict()
+    extra = ""
+    if args.effect:
+        d["detectability"] = _detect(args, rig, ctrl, design, noise, speed,
+                                     tuple(result.parameters))
+        extra = "\n" + "\n".join(_detect_line(r) for r in d["detectability"])
     head = (f"plan: {design.excitation} {design.amplitude:g} A on "
             f"{','.join(design.channels or ('Ax', 'Ay', 'Bx', 'By'))}, {design.duration:g} s "
             f"at dt {design.dt:g} s; noise {noise.noise_rms:.3g} m, r1 {noise.r1_rms:.3g} m, "
             f"r2 {noise.r2_rms:.3g} A; predicted posterior sd (first order, "
             f"{result.n_bins} bins up to {result.f_max_hz:.0f} Hz):")
-    emit(d, head + "\n" + result.table(), args.json)
+    emit(d, head + "\n" + result.table() + extra, args.json)
     return 0
+
+
+def _detect(args: argparse.Namespace, rig, ctrl, design: Design, noise: Noise,
+            speed: float | None, params: tuple[str, ...]) -> list[dict]:
+    from bayes_amb.planning.detect import detectability, smallest_detectable
+    from bayes_amb.simulate.effects import parse_effect
+    out = []
+    for text in args.effect:
+        e = parse_effect(text)
+        if args.smallest:
+            out.append(smallest_detectable(rig, ctrl, design, noise, e, params,
+                                           speed_rpm=speed, seed=args.seed))
+        else:
+            out.append(detectability(rig, ctrl, design, noise, e, params, speed_rpm=speed,
+                                     seed=args.seed))
+    return out
+
+
+def _detect_line(r: dict) -> str:
+    size = ", ".join(f"{k}={v:g}" for k, v in r["params"].items() if isinstance(v, float))
+    line = (f"{r['effect']} ({size}): expected log Bayes factor "
+            f"{r['expected_log_bayes_factor']:.1f} +- {r['scatter_of_log_bf']:.1f}, log "
+            f"posterior odds {r['expected_log_posterior_odds']:.1f} (threshold "
+            f"{r['threshold']:g}): {'detected' if r['detected'] else 'NOT detected'} "
+            f"(probability {r['probability_detected']:.2f})")
+    if "smallest_detectable" in r:
+        sm = r["smallest_detectable"]
+        line += ("; " + r.get("note", "") if sm is None else
+                 "; weakest detectable: " + ", ".join(f"{k}={v:.3g}" for k, v in sm.items()))
+    return line
 
 
 def _optimise(args: argparse.Namespace, rig, ctrl, design: Design, noise: Noise,
