@@ -73,6 +73,15 @@ def test_plan_cli(capsys):
     assert code == 2 and "option --channels" in err
 
 
+def test_plan_page(tmp_path, capsys):
+    code, out, _ = run_cli(["plan", "--duration", "0.5", "--params", "k_By,c_By",
+                            "--out", str(tmp_path)], capsys)
+    assert code == 0 and "plan.html" in out
+    page = (tmp_path / "plan.html").read_text()
+    assert page.count("data:image/png;base64,") == 2 and "k_By" in page
+    assert json.loads((tmp_path / "plan.json").read_text())["plan"]["parameters"]["c_By"]
+
+
 def test_detectability_matches_the_diagnosis(rig_ctrl):
     """The expected log Bayes factor of a 0.4 % sensor gain on By (2 s, 50 nm) is the one
     the diagnosis finds on a record of it, within the scatter the noise gives it

@@ -81,6 +81,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--smallest", action="store_true",
                    help="with --effect: also search the weakest detectable size (about 15 s "
                    "per effect) (default: off)")
+    p.add_argument("--out", default=None, metavar="DIR",
+                   help="also write DIR/plan.json and DIR/plan.html (the design, the "
+                   "prediction, sd against length and amplitude) (default: none)")
     p.add_argument("--seed", type=seed, default=0, help="seed of the design's excitation "
                    "(default 0)")
     p.add_argument("--json", action="store_true", help="print JSON (default: a table)")
@@ -120,6 +123,9 @@ def run(args: argparse.Namespace) -> int:
             f"at dt {design.dt:g} s; noise {noise.noise_rms:.3g} m, r1 {noise.r1_rms:.3g} m, "
             f"r2 {noise.r2_rms:.3g} A; predicted posterior sd (first order, "
             f"{result.n_bins} bins up to {result.f_max_hz:.0f} Hz):")
+    if args.out:
+        from bayes_amb.planning.page import write_plan_page
+        extra += f"\nwrote {write_plan_page(args.out, d)}"
     emit(d, head + "\n" + result.table() + extra, args.json)
     return 0
 
@@ -173,6 +179,9 @@ def _optimise(args: argparse.Namespace, rig, ctrl, design: Design, noise: Noise,
             f"{d.duration:g} s (the default random binary needs {o.default_s:.2f} s: "
             f"{o.gain:.1f}x longer)\n{o.plan.table()}\ncandidates (length that reaches the "
             "targets):\n" + "\n".join(rows))
+    if args.out:
+        from bayes_amb.planning.page import write_plan_page
+        text += f"\nwrote {write_plan_page(args.out, o.plan.to_dict(), o.to_dict())}"
     emit(o.to_dict(), text, args.json)
     return 0
 
