@@ -36,7 +36,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "equivalences), accept effects greedily by Bayes factor and compare "
                        "the fit before and after. Writes DIR/diagnosis.json, "
                        "DIR/residuals.nc and DIR/models/*.nc.")
-    p.add_argument("recording", metavar="NAME.csv", help="the recording (NAME.json beside it)")
+    p.add_argument("recording", metavar="NAME.csv", nargs="+",
+                   help="the recording (NAME.json beside it); several: each diagnosed, and "
+                   "every effect named in one tested in all (DIR/record_<i>/, "
+                   "DIR/records.json)")
     add_rig_option(p)
     p.add_argument("--params", default=None, metavar="NAMES",
                    help="stiffness/damping parameters kept in every model, comma-separated "
@@ -138,8 +141,10 @@ def run(args: argparse.Namespace) -> int:
     if bad:
         raise BayesAmbError(f"option --scan: effect {bad[0]!r} has no node scan; known: "
                             + ", ".join(scanned_effects()))
-    rec = load_recording(args.recording)
-    check_rig_option(args, rec)
+    recs = [load_recording(r) for r in args.recording]
+    for r in recs:
+        check_rig_option(args, r)
+    rec = recs[0]
     planes = None
     if args.planes is not None:
         planes = tuple(p.strip() for p in args.planes.split(","))
@@ -155,11 +160,35 @@ def run(args: argparse.Namespace) -> int:
         if not quiet:
             sys.stderr.write(f"  {text}\n")
 
-    d = diagnose(rec, args.params, priors, DiagnoseOptions(
+    opt = DiagnoseOptions(
         log_bf_threshold=args.threshold, max_effects=args.max_effects, candidates=cands,
-        sample=args.sample, steps=args.steps, seed=args.seed, progress=say, planes=planes))
+        sample=args.sample, steps=args.steps, seed=args.seed, progress=say, planes=planes)
+    if len(recs) > 1:
+        return _run_records(args, recs, priors, opt)
+    d = diagnose(rec, args.params, priors, opt)
     d.save(args.out)
     report = to_jsonable(d.report)
     emit(report, format_report(report) + f"\nwrote {args.out}/diagnosis.json, "
          f"{args.out}/residuals.nc and {args.out}/models/", args.json)
+    return 0
+
+
+def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -> int:
+    from bayes_amb.discrepancy.records import diagnose_records
+    r = diagnose_records(recs, args.params, priors, opt)
+    r.save(args.out)
+    d = to_jsonable(r.to_dict())
+    lines = [f"record {i}: {v} ({s})" for i, (v, s) in
+             enumerate(zip(d["verdicts"], d["recordings"], strict=True), 1)]
+    for row in d["across"]:
+        bf = ", ".join(f"record {k}: " + (f"{v:.1f}" if v is not None else
+                                           "no gain" if row["present"][k] is False
+                                           else "not tested")
+                       for k, v in row["log_bayes_factor"].items())
+        lines.append(f"{row['effect']}: named in record(s) "
+                     f"{','.join(map(str, row['named_in']))}; log Bayes factor {bf}; "
+                     + ("present in every record" if row["in_every_record"]
+                        else "NOT in every record"))
+    emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json and "
+         f"{args.out}/record_<i>/", args.json)
     return 0
