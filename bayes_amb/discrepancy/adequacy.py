@@ -127,7 +127,7 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
     taken = take_in_clipping(recording, names, priors, seed, checks, fwd.parts, eps, nominal)
     checks = replace(checks, checks=(
         *checks.checks,
-        linearity_check(recording, taken.clip, taken.modelled, taken.shift),
+        linearity_check(recording, taken.clip, taken.modelled, taken.shift, taken.fitted),
         information_check(recording, checks, taken.fitted)))
     return checks, taken.fitted, taken.eps
 

@@ -33,6 +33,7 @@ clipping    An amplifier that clips a commanded current the DAQ records unclippe
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
@@ -40,6 +41,7 @@ from scipy import optimize, stats
 from scipy.signal import lfilter
 
 from bayes_amb.control.discrete import ss_freqresp_modal, ss_response
+from bayes_amb.discrepancy.amplitude import amplitude_test
 from bayes_amb.discrepancy.checks import Check
 from bayes_amb.discrepancy.detection_lines import detection_line_test
 from bayes_amb.discrepancy.locate import locate_bands
@@ -307,7 +309,8 @@ def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clippin
 
 
 def linearity_check(rec: Recording, clip: Clipping | None = None,
-                    modelled: str | None = None, shift: NDArray | None = None) -> Check:
+                    modelled: str | None = None, shift: NDArray | None = None,
+                    fitted: Any = None) -> Check:
     """The ``linearity`` data check: it fails on flat tops in the record, or when the
     clipping regression (given as ``clip``) finds a clipped current in the residual.
     modelled: how the fit took the nonlinearity in ('command': clip(u) at the estimated
@@ -316,12 +319,15 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
     flats = flat_tops(rec)
     hits = limit_hits(rec)
     lines = detection_line_test(rec)
+    amp = None if fitted is None else amplitude_test(fitted)
     values: dict = {"flat_tops": flats, "rig_limits": hits,
                     "detection_lines": lines.to_dict(),
+                    **({} if amp is None else amp.to_dict()),
                     **(clip.to_dict() if clip is not None else {}),
                     "modelled": modelled,
                     "coefficient_shift": None if shift is None else [float(v) for v in shift]}
-    problems = [*flats, *hits, *([lines.problem()] if lines.found else [])]
+    problems = [*flats, *hits, *([lines.problem()] if lines.found else []),
+                *([amp.problem()] if amp is not None and amp.found else [])]
     if clip is not None and clip.found:
         problems.append(
             f"the residual follows the recorded current clipped at {clip.limit_a:.3g} A "
@@ -335,8 +341,10 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
         odd = (", no odd distortion on the odd multisine's detection lines (largest "
                f"odd/even power ratio {lines.worst['ratio']:.2f})"
                if lines.design and lines.worst else "")
+        grows = ("" if amp is None else ", the residual does not grow with the amplitude "
+                 f"(p {min(amp.p.values()):.2g})")
         return Check("linearity", True,
-                     "linearity: no flat tops in u or y" + lims + odd + tail, values)
+                     "linearity: no flat tops in u or y" + lims + odd + grows + tail, values)
     return Check("linearity", False,
                  "linearity: FAILED - " + "; ".join(problems) + ". The loop is not linear "
                  "here (an amplifier current limit or a probe at the end of its range): "
