@@ -37,7 +37,7 @@ from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.io.controller_file import ControllerFile
-from bayes_amb.planning.fisher import STEP, log10_sigma_of
+from bayes_amb.planning.fisher import log10_sigma_of, residual_jacobian
 from bayes_amb.planning.plan import BEARING_COEFFICIENTS, Design, Noise
 from bayes_amb.rig import Rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
@@ -113,12 +113,7 @@ def detectability(rig: Rig, controller: ControllerFile, design: Design, noise: N
     delta = _eps_dft(like, record(effect)) - E0
     d = (_eps_dft(like, record(replace(effect, params={**effect.params, sm.size: p + h})))
          - E0 - delta) / h
-    rows = np.tile(theta, (2 * theta.size, 1))
-    for j in range(theta.size):
-        rows[2 * j, j] += STEP
-        rows[2 * j + 1, j] -= STEP
-    R, _ = like.residual_dft(rows)
-    J = np.stack([(R[2 * j] - R[2 * j + 1]) / (2 * STEP) for j in range(theta.size)], -1)
+    J = residual_jacobian(like, theta)
     W = like.curvature_weights(theta, ls)[np.repeat(np.arange(like.starts.size),
                                                     like.counts)]
     F = 2 * np.einsum("kci,kcd,kdj->ij", J.conj(), W, J).real

@@ -78,15 +78,7 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     like = WhittleLikelihood(fwd, eps)
     theta = np.asarray(theta, dtype=float)
     like.set_model_prewhitening(theta, log10_sigma)
-    p = theta.size
-    rows = np.tile(theta, (2 * p, 1))
-    for j in range(p):
-        rows[2 * j, j] += STEP
-        rows[2 * j + 1, j] -= STEP
-    R, stable = like.residual_dft(rows)
-    if not np.all(stable):
-        raise ValueError("the controller does not stabilise the model next to theta")
-    J = np.stack([(R[2 * j] - R[2 * j + 1]) / (2 * STEP) for j in range(p)], axis=-1)
+    J = residual_jacobian(like, theta)
     nb = like.starts.size
     sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
     gain = np.ones((3, nb)) if source_gain is None else source_gain(like.band_freq_hz)
@@ -102,6 +94,20 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     return Information(tuple(names), theta, np.asarray(log10_sigma, dtype=float),
                        0.5 * (F + F.T), int(like.k.size), like.f_max_hz,
                        B=0.5 * (B + B.T), log10_sigma_model=ls_model)
+
+
+def residual_jacobian(like: WhittleLikelihood, theta: NDArray) -> NDArray:
+    """dR_k/dtheta (nf, 4, p) of the likelihood's residual DFT at theta, by central
+    differences of step STEP."""
+    p = theta.size
+    rows = np.tile(theta, (2 * p, 1))
+    for j in range(p):
+        rows[2 * j, j] += STEP
+        rows[2 * j + 1, j] -= STEP
+    R, stable = like.residual_dft(rows)
+    if not np.all(stable):
+        raise ValueError("the controller does not stabilise the model next to theta")
+    return np.stack([(R[2 * j] - R[2 * j + 1]) / (2 * STEP) for j in range(p)], axis=-1)
 
 
 def _spectrum(like: WhittleLikelihood, sig2_band: NDArray) -> NDArray:

@@ -43,16 +43,32 @@ def multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt:
     periodic over the record. Channels have independent phases.
     """
     f0 = 1.0 / (n * dt)
+    lo, hi = _band(band_hz, dt)
+    k = np.unique(np.round(np.geomspace(max(lo / f0, 1), hi / f0, n_lines)).astype(int))
+    return _sum_of_lines(n, n_ch, amplitude, rng, dt, k)
+
+
+def _band(band_hz: tuple[float, float] | None, dt: float) -> tuple[float, float]:
+    """A multisine's band (Hz), checked; None: 5 Hz to min(1000 Hz, 0.8 Nyquist)."""
     lo, hi = (5.0, min(1000.0, 0.4 / dt)) if band_hz is None else band_hz
     if not (0 < lo < hi <= 0.5 / dt):
         raise BayesAmbError(f"multisine band {band_hz} Hz must satisfy 0 < lo < hi <= "
                             f"Nyquist {0.5 / dt:g} Hz")
-    k = np.unique(np.round(np.geomspace(max(lo / f0, 1), hi / f0, n_lines)).astype(int))
+    return lo, hi
+
+
+def _sum_of_lines(n: int, n_ch: int, amplitude: float, rng: np.random.Generator, dt: float,
+                  k: NDArray) -> NDArray:
+    """Cosines at the multiples k of 1/(n dt), random phases per channel, each channel's
+    peak scaled to amplitude (summed 256 lines at a time: bounded memory)."""
+    f0 = 1.0 / (n * dt)
     t = np.arange(n) * dt
     out = np.empty((n, n_ch))
     for c in range(n_ch):
         ph = rng.uniform(0, 2 * np.pi, k.size)
-        x = np.cos(2 * np.pi * f0 * np.outer(t, k) + ph).sum(axis=1)
+        x = np.zeros(n)
+        for i in range(0, k.size, 256):
+            x += np.cos(2 * np.pi * f0 * np.outer(t, k[i:i + 256]) + ph[i:i + 256]).sum(axis=1)
         out[:, c] = x / np.max(np.abs(x))
     return amplitude * out
 
@@ -67,10 +83,7 @@ def odd_multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
     distortion on the odd ones (discrepancy/detection_lines.py). Same default band as
     :func:`multisine`."""
     f0 = 1.0 / (n * dt)
-    lo, hi = (5.0, min(1000.0, 0.4 / dt)) if band_hz is None else band_hz
-    if not (0 < lo < hi <= 0.5 / dt):
-        raise BayesAmbError(f"multisine band {band_hz} Hz must satisfy 0 < lo < hi <= "
-                            f"Nyquist {0.5 / dt:g} Hz")
+    lo, hi = _band(band_hz, dt)
     k0, k1 = int(np.ceil(lo / f0)), int(np.floor(hi / f0))
     odd = np.arange(k0 + (k0 + 1) % 2, k1 + 1, 2)
     keep = np.ones(odd.size, dtype=bool)
@@ -80,15 +93,7 @@ def odd_multisine(n: int, n_ch: int, amplitude: float, rng: np.random.Generator,
     if k.size < 2:
         raise BayesAmbError(f"odd multisine: the band {lo:g}-{hi:g} Hz holds too few odd "
                             f"lines of the record's {f0:g} Hz grid")
-    t = np.arange(n) * dt
-    out = np.empty((n, n_ch))
-    for c in range(n_ch):
-        ph = rng.uniform(0, 2 * np.pi, k.size)
-        x = np.zeros(n)
-        for i in range(0, k.size, 256):                 # bounded memory (n x 256)
-            x += np.cos(2 * np.pi * f0 * np.outer(t, k[i:i + 256]) + ph[i:i + 256]).sum(axis=1)
-        out[:, c] = x / np.max(np.abs(x))
-    return amplitude * out
+    return _sum_of_lines(n, n_ch, amplitude, rng, dt, k)
 
 
 def binary_hold(band_hz: tuple[float, float] | None, dt: float) -> int:
