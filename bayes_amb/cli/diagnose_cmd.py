@@ -104,6 +104,8 @@ def format_report(r: dict) -> str:
                          f"(log BF {e['score']:.1f}, {e.get('confidence', 'confident')}{same})")
     else:
         lines.append("explanation   : none named")
+    for s in r.get("stand_ins") or []:
+        lines.append(f"stand-in      : {s['line']}")
     for pl in (r.get("balancing") or {}).get("planes", []):
         u, ph = pl["u_kgm"], pl["phase_deg"]
         lines.append(f"balancing     : plane {pl['plane']}: {u['map']:.3g} [{u['hdi90'][0]:.3g}, "

@@ -33,6 +33,12 @@ def format_library(rows: list[dict]) -> str:
         out.append("  at          : " + ", ".join(r["locations"]))
         out.append("  reports     : " + ", ".join(f"{p['name']} ({p['unit']})"
                                                   for p in r["parameters"]))
+        for q in r["parameters"]:
+            if q["plausible"] is not None:
+                out += textwrap.wrap(f"{q['name']} within {q['plausible'][0]:g} .. "
+                                     f"{q['plausible'][1]:g}: {q['why']} (outside: a stand-in)",
+                                     width=92, initial_indent="  plausible   : ",
+                                     subsequent_indent="                ")
         out.append("  sampled     : " + ", ".join(f"{s['name']} {s['prior']} [{s['unit']}], "
                                                   f"null {s['null']:g}" for s in r["sampled"]))
         out += textwrap.wrap(r["fingerprint"], width=92, initial_indent="  fingerprint : ",

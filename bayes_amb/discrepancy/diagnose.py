@@ -55,6 +55,7 @@ from bayes_amb.discrepancy.locate import (
 from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.discrepancy.revisit import revisit
 from bayes_amb.discrepancy.select import Selection, SelectOptions, select
+from bayes_amb.discrepancy.stand_ins import stand_ins
 from bayes_amb.discrepancy.story import plain_language
 from bayes_amb.discrepancy.unexplained import unexplained_block
 from bayes_amb.errors import BayesAmbError
@@ -216,10 +217,10 @@ def _after_from(named: FittedModel, reported: FittedModel, mixed: bool) -> str:
 
 
 def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
-             unexplained: dict[str, Any]) -> str:
+             unexplained: dict[str, Any], substitutes: list[dict[str, Any]]) -> str:
     if checks.failed:
         return "data check failed"
-    if unexplained["present"]:
+    if unexplained["present"] or substitutes:
         return "partly explained" if accepted else "unexplained"
     if accepted:
         return "explained"
@@ -318,7 +319,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
     all_effects = effect_summaries(reported, s_fin)
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
-    confidence = "tentative" if unexplained["present"] else "confident"
+    substitutes = stand_ins(effects)
+    confidence = "tentative" if unexplained["present"] or substitutes else "confident"
     s_coef = (averaged(s_fin, s_nom, nominal.p) if confidence == "tentative" and sel.accepted
               else s_fin)
     explanations = []
@@ -354,7 +356,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                           "meaning": "samples before start_s drive the model but are not "
                                      "compared (start-up transient of a record that does "
                                      "not start at rest, or of removed offsets)"},
-        "verdict": _verdict(checks, loc, sel.accepted, unexplained),
+        "verdict": _verdict(checks, loc, sel.accepted, unexplained, substitutes),
         "adequacy": judge(checks, loc, max(before["nrmse"].values()),
                           advice=NOMINAL_ADVICE).to_dict(),
         "adequacy_after": judge(checks, final_loc, max(after["nrmse"].values()),
@@ -362,6 +364,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,
+        "stand_ins": substitutes,
         "balancing": balancing(sel.final, opt.planes, priors, seed=opt.seed),
         "candidates": sel.scores,
         "fit": {"before": {k: before[k] for k in ("nrmse", "whiteness_p")},

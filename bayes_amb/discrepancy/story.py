@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import Any
 
 from bayes_amb.discrepancy.library.registry import REGISTRY
+from bayes_amb.discrepancy.stand_ins import stand_in_sentence
 
 
 def _library_titles() -> str:
@@ -154,6 +155,9 @@ def plain_language(report: dict[str, Any]) -> str:
         text.append(f"None of the candidate physics ({_library_titles()}) explains it.")
     if unexpl:
         text.append(unexpl)
+    subst = stand_in_sentence(report.get("stand_ins") or [])
+    if subst:
+        text.append(subst)
     if noise:
         text.append(noise)
     return " ".join(text)

@@ -48,15 +48,26 @@ def discrepancy_section(run: RunData) -> Section:
     if dg.get("explanations"):
         tables.append(Table("Named physics (posterior of its parameters)",
                             ["effect", "location", "parameter", "mean", "90 % HDI", "unit",
-                             "log BF", "cannot be told from"],
+                             "log BF", "naming", "cannot be told from"],
                             [[_effect_title(e["effect"]), e["location"], k, g(v["mean"]),
                               _hdi(v), v["unit"], g(e["score"], 3),
+                              e.get("confidence", "confident"),
                               "; ".join(e.get("equivalence_class", [])[1:]) or "–"]
                              for e in dg["explanations"] for k, v in e["params"].items()],
                             "Effect names and units from the physics library "
                             "(`bayes-amb library`); the last column is the effect's "
                             "equivalence class: explanations with the same u → y map.",
-                            wrap=(0, 1, 4, 7)))
+                            wrap=(0, 1, 4, 8)))
+    if dg.get("stand_ins"):
+        tables.append(Table("Stand-ins: named effects fitted where their physics does not "
+                            "allow them", ["effect", "location", "quantity", "90 % HDI",
+                                           "plausible", "why"],
+                            [[_effect_title(s["effect"]), s["location"], s["quantity"],
+                              _hdi(s), f"[{g(s['plausible'][0])}, {g(s['plausible'][1])}]",
+                              s["why"]] for s in dg["stand_ins"]],
+                            "The data accept the named model, but not as the physics its "
+                            "names claim: the naming is tentative and the library lacks "
+                            "what the record holds.", wrap=(0, 5)))
     bal = (dg.get("balancing") or {}).get("planes", [])
     if bal:
         tables.append(Table("Unbalance as two correction planes", [

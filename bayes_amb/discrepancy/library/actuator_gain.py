@@ -39,6 +39,9 @@ ENTRY = EffectEntry(
     side="actuator", locations=CHANNELS,
     sampled=(Sampled("act_gain_{location}", Prior("normal", 0.0, 0.1), 0.0, "-",
                      "relative ki error"),),
-    physical=(Quantity("gain", "-", "relative ki error (ki_true / ki - 1)"),),
+    physical=(Quantity("gain", "-", "relative ki error (ki_true / ki - 1)",
+                       plausible=(-0.5, 0.5),
+                       why="a bearing's force constant is not off by half of its design "
+                           "value"),),
     repeatable=True, make=lambda loc: ActuatorGain("actuator_gain", loc))
 ActuatorGain.entry = ENTRY

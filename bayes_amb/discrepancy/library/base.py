@@ -50,11 +50,17 @@ class EffectParam:
 
 @dataclass(frozen=True)
 class Quantity:
-    """A physical quantity an effect reports: name, SI unit, meaning."""
+    """A physical quantity an effect reports: name, SI unit, meaning, and where its physics
+    allows it to lie (``plausible``, (low, high), None where it does not say). An effect
+    whose whole 90 % interval falls outside that range is a stand-in: it fits something the
+    library lacks, and the diagnosis says so (discrepancy/stand_ins.py). ``why`` gives the
+    physics of the range in one clause."""
 
     name: str
     unit: str
     meaning: str
+    plausible: tuple[float, float] | None = None
+    why: str = ""
 
 
 @dataclass(frozen=True)

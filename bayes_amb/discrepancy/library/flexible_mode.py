@@ -88,6 +88,9 @@ ENTRY = EffectEntry(
                      "log of the pair's damping multiplier (FE: 0)")),
     physical=(Quantity("frequency_hz", "Hz", "backward-whirl bending frequency"),
               Quantity("forward_hz", "Hz", "forward-whirl bending frequency"),
-              Quantity("damping_ratio", "-", "backward-whirl damping ratio")),
+              Quantity("damping_ratio", "-", "backward-whirl damping ratio",
+                       plausible=(0.0, 0.2),
+                       why="a shaft's bending mode is lightly damped (about 0.001-0.05); "
+                           "above 0.2 it has no resonance left to be called a mode")),
     repeatable=True, make=_make)
 FlexibleMode.entry = ENTRY

@@ -148,8 +148,9 @@ def library_table(with_nominal: bool = False) -> list[dict[str, Any]]:
             "effect": e.name, "title": e.title, "side": e.side,
             "locations": list(e.locations) + ([e.scan] if e.scan else []),
             "repeatable": e.repeatable,
-            "parameters": [{"name": q.name, "unit": q.unit, "meaning": q.meaning}
-                           for q in e.physical],
+            "parameters": [{"name": q.name, "unit": q.unit, "meaning": q.meaning,
+                            "plausible": None if q.plausible is None else list(q.plausible),
+                            "why": q.why} for q in e.physical],
             "sampled": [{"name": s.name, "unit": s.unit, "prior": s.describe_prior(),
                          "null": s.null, "meaning": s.meaning} for s in e.sampled],
             "fingerprint": e.fingerprint, "equivalences": eq,
@@ -164,7 +165,10 @@ def markdown_table() -> str:
             "cannot be told from |\n|---|---|---|---|---|")
     lines = [head]
     for r in library_table():
-        par = ", ".join(f"`{p['name']}` ({p['unit']})" for p in r["parameters"])
+        par = ", ".join(f"`{p['name']}` ({p['unit']}" + (
+            "" if p["plausible"] is None else
+            f"; plausible {p['plausible'][0]:g} to {p['plausible'][1]:g}") + ")"
+            for p in r["parameters"])
         smp = ", ".join(f"`{s['name']}` {s['prior']}, {s['null']:g}" for s in r["sampled"])
         where = ", ".join(r["locations"])
         eq = "; ".join(r["equivalences"]) or "–"

@@ -64,7 +64,10 @@ ENTRY = EffectEntry(
     side="plant", locations=("truncated modes",),
     sampled=(Sampled("residual_scale", Prior("normal", 1.0, 0.5), 0.0, "-",
                      "scale of the FE static residual (0: none, 1: FE value)"),),
-    physical=(Quantity("scale", "-", "scale of the FE static residual"),
+    physical=(Quantity("scale", "-", "scale of the FE static residual", plausible=(0.25, 4.0),
+                       why="the truncated modes' static compliance follows from the FE "
+                           "stiffness that also places the kept modes; a factor of 4 "
+                           "either way contradicts them"),
               Quantity("compliance_A", "m/N", "static compliance at bearing A"),
               Quantity("compliance_B", "m/N", "static compliance at bearing B")),
     make=lambda loc: ResidualFlexibility("residual_flexibility", loc))

@@ -37,6 +37,7 @@ ENTRY = EffectEntry(
     side="sensor", locations=CHANNELS,
     sampled=(Sampled("gain_{location}", Prior("normal", 0.0, 0.1), 0.0, "-",
                      "relative sensitivity error"),),
-    physical=(Quantity("gain", "-", "relative sensitivity error"),),
+    physical=(Quantity("gain", "-", "relative sensitivity error", plausible=(-0.5, 0.5),
+                       why="a calibrated displacement probe is not off by half"),),
     repeatable=True, make=lambda loc: SensorGain("sensor_gain", loc))
 SensorGain.entry = ENTRY
