@@ -316,6 +316,23 @@ def test_eddy_currents_are_the_slab_diffusion_law_not_a_first_order_lag():
     assert abs(h - _h1(fc)(s)) > 0.05
 
 
+@pytest.mark.parametrize("deg", [5.0, -90.0])
+def test_a_turned_probe_pair_sees_the_displacement_in_its_own_frame(deg):
+    """G_eff = T G with T the turn of bearing A's probe pair (p_x = cos a q_x + sin a q_y,
+    p_y = -sin a q_x + cos a q_y); at -90 degrees p_x = -q_y and p_y = q_x."""
+    a = np.radians(deg)
+    T = np.eye(4)
+    T[:2, :2] = [[np.cos(a), np.sin(a)], [-np.sin(a), np.cos(a)]]
+    p0 = _plant(())
+    p1 = _plant((Effect("probe_angle", {"bearing": "A", "angle_deg": deg}),))
+    for f_hz in (20.0, 300.0, 1200.0):
+        G0, G1 = _frf(p0.A, p0.B, p0.C, f_hz), _frf(p1.A, p1.B, p1.C, f_hz)
+        assert np.abs(G1 - T @ G0).max() < 1e-9 * np.abs(G0).max()
+        assert np.abs(G1 - G0).max() > 1e-2 * np.abs(G0).max()
+    if deg == -90.0:
+        assert np.allclose(G1[0], -G0[1]) and np.allclose(G1[1], G0[0])
+
+
 def test_cross_coupling_is_the_tools_kxy_parameter():
     """kxy at disc D1 in the reduced truth = the tool's reduced LFT at theta = kxy / k_ref."""
     from bayes_amb.reduction import reduce_pseudo_modal

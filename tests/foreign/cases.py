@@ -255,6 +255,9 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float,
         c = k / (u(0.3, 0.8) * speed_rpm * np.pi / 30.0)
         p = {"node": node, "k_direct_nm": k * u(-1.0, 2.0), "k_cross_nm": k,
              "c_direct_nsm": c, "c_cross_nsm": c * u(0.0, 0.2)}
+    elif name == "probe_angle":
+        p = {"bearing": str(rng.choice(["A", "B"])),
+             "angle_deg": float(rng.choice([-1, 1]) * u(2.0, 8.0))}
     elif name == "ks_drift":
         # a total change of 2-6 % of ks over the record, either sign, centred mid-record
         p = {"where": str(rng.choice(_WHERE)),
@@ -293,6 +296,8 @@ def _weaker(e: Effect, f: float = 0.7) -> Effect:
             p[k] *= f
     elif e.name == "ks_drift":
         p["rate_per_s"] *= f
+    elif e.name == "probe_angle":
+        p["angle_deg"] *= f
     elif e.name == "current_limit":
         raise ValueError("current_limit is not concealed: its strength is the clipped share")
     return Effect(e.name, p)
