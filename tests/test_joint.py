@@ -64,3 +64,24 @@ def test_joint_cli(records, tmp_path, capsys):
     code, _, err = run_cli(["identify", paths[0], "--params", "k_By", "--per-record", "k_By",
                             "--map-only", "--out", str(tmp_path / "x")], capsys)
     assert code == 2 and "--per-record" in err
+
+
+def test_records_that_disagree_get_the_random_effects_interval_and_a_line(records):
+    """A third record whose k_By is 0.45 instead of 0.2 (a bearing that changed, or a
+    nonlinear loop at another level): the records disagree on k_By, not on c_By; the
+    joint k_By interval is widened by their spread and the adequacy line names it."""
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4, 31500.0), rig)
+    cfg = SimulationConfig(truth="reduced", params={**TRUTH, "k_By": 0.45}, noise_rms=5e-8,
+                           duration=0.5, speed_rpm=31500.0, seed=3)
+    changed = simulate_recording(rig, ctrl, cfg)[0]
+    agree = identify_joint(records, "k_By,c_By", options=OPT).summary
+    assert agree["agreement"]["disagree"] == [] and agree["adequacy"]["adequate"]
+    s = identify_joint([*records, changed], "k_By,c_By", options=OPT).summary
+    assert s["agreement"]["disagree"] == ["k_By"]
+    assert not s["adequacy"]["adequate"] and "k_By" in s["adequacy"]["line"]
+    assert "--per-record k_By" in s["adequacy"]["line"]
+    fixed = s["agreement"]["parameters"]["k_By"]
+    assert s["parameters"]["k_By"]["sd"] == pytest.approx(fixed["random_effects_sd"])
+    assert s["parameters"]["k_By"]["sd"] > 5 * max(
+        agree["parameters"]["k_By"]["sd"], min(fixed["record_sds"]))

@@ -112,6 +112,8 @@ def format_joint(s: dict) -> str:
         noise = ", ".join(f"{k} {v['value']:.3g} {v['unit']}" for k, v in r["noise"].items())
         lines.append(f"record {i}: {r['recording']}, {r['speed_rpm']:g} rpm, dt {r['dt']:g} s; "
                      f"noise {noise}")
+    if "agreement" in s and not s["agreement"]["disagree"]:
+        lines.append(f"agreement: {s['agreement']['line']}")
     lines.append(f"adequacy: {s['adequacy']['line']}")
     return "\n".join(lines)
 

@@ -20,6 +20,10 @@ When a record's model is not adequate (its adequacy test), its own reported post
 the one with the model error integrated out (identify._with_model_error); the joint
 posterior is then the product of the records' reported Gaussian posteriors (divided by the
 prior counted R - 1 times too many), so that no record's doubt is lost in the combination.
+
+Whether the records agree on what they share is tested (consistency.py: Cochran's Q on
+each record's reported posterior); a parameter they disagree on gets the random-effects
+interval, widened by their spread, and the adequacy line says so (summary['agreement']).
 """
 
 from __future__ import annotations
@@ -34,6 +38,7 @@ from scipy.optimize import minimize
 
 from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.identify import (
     IdentificationResult,
     IdentifyOptions,
@@ -139,6 +144,7 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
     summary["adequacy"] = _joint_adequacy(own, inadequate)
     if inadequate:
         _product_of_reported(summary, own, names, joint_names, idx, prior_set, rig)
+    _check_agreement(summary, own, [n for n in names if n not in per], rig)
     if not opt.map_only:
         summary["inference_note"] = ("the joint posterior is the Laplace approximation; "
                                      "emcee is run per record (identify REC.csv)")
@@ -224,6 +230,27 @@ def _joint_adequacy(own: list[IdentificationResult], bad: list[int]) -> dict[str
             "line": (f"model NOT adequate on {len(bad)} of {len(own)} records; the joint "
                      "intervals combine each record's reported posterior, with its model "
                      "error integrated out. " + " | ".join(lines))}
+
+
+def _check_agreement(summary: dict[str, Any], own: list[IdentificationResult],
+                     shared: list[str], rig: Any) -> None:
+    """Whether the records agree on the shared parameters (consistency.py); where they do
+    not, the joint interval becomes the random-effects one and the adequacy says so."""
+    found = agreement({n: [o.summary["parameters"][n]["mean"] for o in own] for n in shared},
+                      {n: [o.summary["parameters"][n]["sd"] for o in own] for n in shared})
+    summary["agreement"] = found
+    if not found["disagree"]:
+        return
+    base = own[0].map
+    for n in found["disagree"]:
+        row = found["parameters"][n]
+        one = replace(base, theta=np.array([row["random_effects_mean"]]))
+        summary["parameters"][n] = _laplace_summary(
+            (n,), one, np.array([[row["random_effects_sd"] ** 2]]), rig)[n]
+    ad = summary["adequacy"]
+    ad["adequate"] = False
+    ad["line"] = ("model NOT adequate for one shared posterior: " + found["line"]
+                  if not ad.get("records") else ad["line"] + " | " + found["line"])
 
 
 def _product_of_reported(summary: dict[str, Any], own: list[IdentificationResult],

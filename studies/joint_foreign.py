@@ -1,0 +1,167 @@
+"""Issue 29: several recordings in one posterior, on the foreign generator.
+
+A group is one rotor (its eight bearing coefficients drawn once, off nominal) recorded at
+three speeds, 0.65, 0.8 and 1.0 x the nominal 31 500 rpm, each record with its own habits
+(offsets, noise colour, lines, drift, burn-in) and its own noise realisation, as a
+commissioning engineer records a run-up. A group's effects, if its kind has any, are drawn
+and concealed once at the nominal speed and then played unchanged at every speed.
+
+Per group, `identify_joint` (the product's default options, the eight coefficients
+shared) gives the joint posterior; its summary also holds each record's own fit, which
+is the single-record answer. Scored here, the only place the truth is read:
+
+- coverage: the truth inside the joint 90 % interval, per coefficient, and inside each
+  record's own;
+- width: the single records' mean width over the joint width, per coefficient, against
+  the sqrt(3) = 1.73 that three records of equal information would give (records at lower
+  speed carry less, so a smaller ratio can be right: the ratio is also given against the
+  records' own precision-weighted combination, which equals 1 when the joint is exactly
+  the product of the singles).
+
+    PYTHONPATH=. python studies/joint_foreign.py --out runs/joint --groups control=10
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from dataclasses import replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bayes_amb.inference.joint import identify_joint
+from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.io.nonfinite import plain, result_json_text
+from bayes_amb.io.recording import load_recording
+from bayes_amb.rig import load_rig
+from studies.foreign_benchmark import COEFFICIENTS, _controller_file, kind_number
+from tests.foreign import draw_case, write_case
+from tests.foreign.cases import _controller, conceal
+from tests.foreign.habits import draw_habits
+
+SPEEDS = (0.65, 0.8, 1.0)
+"""Speeds of a group, as fractions of the nominal 31 500 rpm."""
+
+
+def write_group(out: Path, kind: str, g: int, seed: int, ctrl: Path) -> list[Path]:
+    """The three recordings of group g of a kind (module doc); returns their CSV paths."""
+    rng = np.random.default_rng([seed, g, kind_number(kind)])
+    spec = draw_case(kind, rng, controller_file=str(ctrl))
+    if spec.effects:
+        spec, _ = conceal(spec, _controller(spec, None), rng, load_rig())
+    paths = []
+    for f in SPEEDS:
+        rpm = spec.speed_rpm * f
+        rec = replace(spec, speed_rpm=rpm, speed_rpm_true=spec.speed_rpm_true * f,
+                      habits=replace(draw_habits(rng, spec.habits.noise_rms_m),
+                                     force_rms_n=spec.habits.force_rms_n,
+                                     force_band_hz=spec.habits.force_band_hz,
+                                     force_at=spec.habits.force_at))
+        name = f"{kind}_{g:02d}_{round(100 * f):03d}"
+        paths.append(write_case(rec, out / "recordings", name, rng,
+                                conceal_effects=False)["csv"])
+    return paths
+
+
+def score(summary: dict[str, Any], theta: dict[str, float]) -> dict[str, Any]:
+    """Coverage and widths of one group's joint summary (module doc)."""
+    row: dict[str, Any] = {"joint": {}, "single": [], "ratio": {}, "ratio_product": {}}
+    for n in COEFFICIENTS:
+        lo, hi = summary["parameters"][n]["hdi90"]
+        row["joint"][n] = {"inside": bool(lo <= theta[n] <= hi), "width": hi - lo}
+    for rec in summary["records"]:
+        own = {}
+        for n in COEFFICIENTS:
+            lo, hi = rec["parameters"][n]["hdi90"]
+            own[n] = {"inside": bool(lo <= theta[n] <= hi), "width": hi - lo}
+        row["single"].append(own)
+    for n in COEFFICIENTS:
+        widths = np.array([s[n]["width"] for s in row["single"]])
+        row["ratio"][n] = float(np.mean(widths) / row["joint"][n]["width"])
+        product = 1.0 / np.sqrt(np.sum(1.0 / widths ** 2))     # widths scale like sd
+        row["ratio_product"][n] = float(product / row["joint"][n]["width"])
+    return row
+
+
+def run(out: Path, groups: dict[str, int], seed: int) -> None:
+    (out / "joint").mkdir(parents=True, exist_ok=True)
+    ctrl = _controller_file(out, 1e-4)
+    rows_path = out / "rows.jsonl"
+    done = ({json.loads(line)["group"] for line in rows_path.read_text().splitlines()}
+            if rows_path.is_file() else set())
+    for kind, count in groups.items():
+        for g in range(count):
+            name = f"{kind}_{g:02d}"
+            if name in done:
+                continue
+            paths = write_group(out, kind, g, seed, ctrl)
+            res = identify_joint([load_recording(p) for p in paths], list(COEFFICIENTS))
+            write_text_atomic(out / "joint" / f"{name}.json",
+                              result_json_text(plain(res.summary, float)))
+            truth = json.loads(paths[0].with_suffix(".truth.json").read_text())
+            row = {"group": name, "kind": kind, "seconds": res.summary["wall_s"],
+                   "adequate": res.summary["adequacy"].get("adequate"),
+                   **score(res.summary, truth["theta"])}
+            with rows_path.open("a") as fh:
+                fh.write(json.dumps(plain(row, float)) + "\n")
+            inside = sum(v["inside"] for v in row["joint"].values())
+            print(f"{name}: joint {inside}/8 inside, width ratio "
+                  f"{np.median(list(row['ratio'].values())):.2f}, "
+                  f"{row['seconds']:.0f} s", flush=True)
+    summarise(out)
+
+
+def summarise(out: Path) -> dict[str, Any]:
+    rows = [json.loads(line) for line in (out / "rows.jsonl").read_text().splitlines()]
+    by_kind: dict[str, list] = {}
+    for r in rows:
+        by_kind.setdefault(r["kind"], []).append(r)
+    table = {}
+    lines = ["| groups | joint inside | singles inside | width ratio single/joint "
+             "(median, range) | joint / product of singles (median) | adequate |",
+             "|---|---|---|---|---|---|"]
+    for kind, rs in [*by_kind.items(), ("all", rows)]:
+        j = [v["inside"] for r in rs for v in r["joint"].values()]
+        s = [v["inside"] for r in rs for rec in r["single"] for v in rec.values()]
+        ratio = [v for r in rs for v in r["ratio"].values()]
+        prod = [v for r in rs for v in r["ratio_product"].values()]
+        table[kind] = {"groups": len(rs), "joint_inside": float(np.mean(j)),
+                       "joint_cases": len(j), "single_inside": float(np.mean(s)),
+                       "ratio_median": float(np.median(ratio)),
+                       "ratio_range": [float(min(ratio)), float(max(ratio))],
+                       "product_median": float(np.median(prod)),
+                       "adequate": sum(bool(r["adequate"]) for r in rs)}
+        t = table[kind]
+        lines.append(f"| {kind}: {len(rs)} | {sum(j)}/{len(j)} ({100 * t['joint_inside']:.0f} %)"
+                     f" | {sum(s)}/{len(s)} ({100 * t['single_inside']:.0f} %) | "
+                     f"{t['ratio_median']:.2f} ({t['ratio_range'][0]:.2f}-"
+                     f"{t['ratio_range'][1]:.2f}) | {t['product_median']:.2f} | "
+                     f"{t['adequate']}/{len(rs)} |")
+    text = "\n".join(lines)
+    write_text_atomic(out / "summary.md", text + "\n")
+    write_text_atomic(out / "summary.json", json.dumps(table, indent=1) + "\n")
+    print(text)
+    return table
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--groups", default="control=10",
+                    help="kind=count,... (foreign case kinds; default control=10)")
+    ap.add_argument("--seed", type=int, default=29)
+    ap.add_argument("--summary-only", action="store_true")
+    a = ap.parse_args(argv)
+    if a.summary_only:
+        summarise(a.out)
+        return 0
+    groups = {k: int(v) for k, v in (p.split("=") for p in a.groups.split(","))}
+    run(a.out, groups, a.seed)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
