@@ -6,7 +6,7 @@ import json
 import pytest
 
 from bayes_amb.control.export import export_controller, reference_controller
-from bayes_amb.discrepancy.records import diagnose_records
+from bayes_amb.discrepancy.records import diagnose_records, size_agreement
 from bayes_amb.io.recording import save_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
@@ -34,6 +34,7 @@ def test_an_effect_named_in_one_record_is_tested_in_all(recs, tmp_path):
     assert row["present"]["1"] and row["present"]["2"]   # the physics is there
     assert row["present"]["3"] is False                 # and not in the clean record
     assert not row["in_every_record"]
+    assert row["size"]["records"] == [1, 2] and row["size"]["agree"]   # one kxy in both
     r.save(tmp_path)
     saved = json.loads((tmp_path / "records.json").read_text())
     assert saved["verdicts"][2] == "no mismatch" and (tmp_path / "record_3").is_dir()
@@ -46,3 +47,24 @@ def test_diagnose_cli_takes_several_records(recs, tmp_path, capsys):
     assert code == 0
     d = json.loads(out)
     assert d["recordings"] == paths and len(d["verdicts"]) == 2
+
+
+def _size(q: str, mean: float, half: float) -> dict:
+    return {q: {"mean": mean, "hdi90": [mean - half, mean + half]}}
+
+
+def test_a_1x_size_that_changes_with_speed_points_to_the_other_1x_effect():
+    """A runout of fixed amplitude read as unbalance needs u ~ 1 / Omega^2: at 0.65, 0.8
+    and 1 x speed the three u disagree and the reading names runout; the same u agrees."""
+    speeds = [20475.0, 25200.0, 31500.0]
+    scaled = {str(i + 1): _size("u_kgm", 2e-5 / f ** 2, 1e-6)
+              for i, f in enumerate((0.65, 0.8, 1.0))}
+    out = size_agreement("unbalance@n14", scaled, speeds)
+    assert not out["agree"] and "runout" in out["reading"]
+    same = {str(i + 1): _size("u_kgm", 2e-5 + 3e-7 * i, 1e-6) for i in range(3)}
+    assert size_agreement("unbalance@n14", same, speeds)["agree"]
+    kxy = {"1": _size("kxy", 3e4, 2e3), "3": _size("kxy", 6e4, 2e3)}
+    out = size_agreement("cross_coupling@D1", kxy, speeds)
+    assert out["records"] == [1, 3] and "speed-dependent" in out["reading"]
+    assert size_agreement("actuator_lag@A", kxy, speeds) is None
+    assert size_agreement("unbalance@n14", {"1": same["1"]}, speeds) is None

@@ -190,7 +190,8 @@ def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -
         lines.append(f"{row['effect']}: named in record(s) "
                      f"{','.join(map(str, row['named_in']))}; log Bayes factor {bf}; "
                      + ("present in every record" if row["in_every_record"]
-                        else "NOT in every record"))
+                        else "NOT in every record")
+                     + (f"; size: {row['size']['reading']}" if row.get("size") else ""))
     emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json and "
          f"{args.out}/record_<i>/", args.json)
     return 0

@@ -8,6 +8,14 @@ one pre-specified hypothesis), present when above the diagnosis' threshold (abse
 the candidate gives no likelihood gain at all, which the search does not refine). An effect
 present in every record is a property of the machine; one present in some records only
 depends on what differs between them (speed, amplitude, time), and the table says which.
+
+Its size tells more. Where it was fitted in two or more records, the records' posteriors
+of each of its physical quantities are tested for equality (Cochran's Q,
+inference/consistency.py). An unbalance has the same u (kg m) at every speed and a runout
+the same amplitude at the probe; a 1x line fitted as the wrong one of the two has a size
+that changes with speed (a runout read as unbalance needs u ~ 1 / Omega^2), so a size that
+disagrees across speeds says the name is wrong. A cross-coupling whose kxy changes with
+speed is a seal's or an impeller's (their forces grow with speed), itself a finding.
 """
 
 from __future__ import annotations
@@ -18,6 +26,7 @@ from typing import Any
 
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
 from bayes_amb.discrepancy.library import make_candidate
+from bayes_amb.inference.consistency import agreement
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import Prior
 from bayes_amb.io.atomic import write_text_atomic
@@ -72,9 +81,12 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         cand = make_candidate(key)
         row: dict[str, Any] = {"effect": key, "named_in": [i + 1 for i in where],
                                "log_bayes_factor": {}, "present": {}}
+        sizes: dict[str, dict[str, Any]] = {}
         for i, (rec, d) in enumerate(zip(recordings, diags, strict=True)):
             if i in where:
-                lbf = next(e["score"] for e in d.report["explanations"] if _key(e) == key)
+                e = next(e for e in d.report["explanations"] if _key(e) == key)
+                lbf = e["score"]
+                sizes[str(i + 1)] = e["params"]
             elif d.report["checks"] and any(not c["ok"] for c in d.report["checks"]):
                 lbf = None                              # a failed data check: not tested
             else:
@@ -83,6 +95,9 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
                     prescreen=False))
                 c = next((c for c in alone.report["candidates"] if _key(c) == key), None)
                 lbf = None if c is None else c["log_bayes_factor"]
+                fitted = [e for e in alone.report["explanations"] if _key(e) == key]
+                if fitted:
+                    sizes[str(i + 1)] = fitted[0]["params"]
                 if lbf is None and c is not None and (c.get("screen_gain") or 0.0) <= 0.0:
                     # no likelihood gain at all: the fit is not refined, the effect absent
                     row["log_bayes_factor"][str(i + 1)] = None
@@ -93,5 +108,43 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
                                           else bool(lbf > opt.log_bf_threshold))
         tested = [v for v in row["present"].values() if v is not None]
         row["in_every_record"] = bool(tested) and all(tested)
+        row["size"] = size_agreement(key, sizes, [r.speed_rpm for r in recordings])
         across.append(row)
     return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings])
+
+
+SIZE_QUANTITIES = {"unbalance": ("u_kgm",), "runout": ("amplitude_m",),
+                   "cross_coupling": ("kxy",)}
+"""The physical quantities whose agreement across records is read (phases are left out:
+a record without a once-per-revolution reference starts at any angle)."""
+
+
+def size_agreement(key: str, sizes: dict[str, dict[str, Any]], speeds: list[float]
+                   ) -> dict[str, Any] | None:
+    """Whether an effect fitted in several records has the same size in each (module
+    doc): ``sizes`` maps a record number to its fitted physical parameters. The sd of each
+    record's value is its 90 % interval's width / 3.29 (Laplace: normal). None where the
+    effect has no size quantity or was fitted in fewer than two records."""
+    effect = key.split("@")[0]
+    quantities = SIZE_QUANTITIES.get(effect, ())
+    if len(sizes) < 2 or not quantities:
+        return None
+    recs = sorted(sizes, key=int)
+    means = {q: [sizes[r][q]["mean"] for r in recs] for q in quantities}
+    sds = {q: [(sizes[r][q]["hdi90"][1] - sizes[r][q]["hdi90"][0]) / 3.29 for r in recs]
+           for q in quantities}
+    out = agreement(means, sds)
+    rpm = [speeds[int(r) - 1] for r in recs]
+    if not out["disagree"]:
+        reading = (f"the same size in records {', '.join(recs)} "
+                   f"({', '.join(f'{v:g}' for v in rpm)} rpm): a property of the machine")
+    elif effect in ("unbalance", "runout"):
+        other = "runout" if effect == "unbalance" else "unbalance"
+        reading = (f"its size changes between records {', '.join(recs)} "
+                   f"({', '.join(f'{v:g}' for v in rpm)} rpm), which {effect} does not: the "
+                   f"1x line is more likely {other} or another synchronous effect")
+    else:
+        reading = (f"its size changes with the record ({', '.join(f'{v:g}' for v in rpm)} "
+                   "rpm): speed-dependent, as a seal's or an impeller's force is")
+    return {"records": [int(r) for r in recs], "test": out, "agree": not out["disagree"],
+            "reading": reading}
