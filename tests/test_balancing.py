@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bayes_amb.discrepancy.balancing import default_planes, plane_z, two_plane
-from bayes_amb.discrepancy.candidates import BEARING_COEFFICIENTS as NAMES
+from bayes_amb.discrepancy.library import BEARING_COEFFICIENTS as NAMES
 from bayes_amb.discrepancy.library import Unbalance
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference.offline import dual_youla_eps

@@ -15,7 +15,7 @@ from scipy import stats
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import DiagnoseOptions, all_candidates, diagnose
-from bayes_amb.discrepancy.candidates import BEARING_COEFFICIENTS
+from bayes_amb.discrepancy.library import BEARING_COEFFICIENTS
 from bayes_amb.discrepancy.locate import _coherence, holm, merge_spans
 from bayes_amb.io.recording import load_recording, save_recording
 from bayes_amb.rig import load_rig

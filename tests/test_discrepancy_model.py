@@ -21,7 +21,7 @@ from bayes_amb.discrepancy import (
     Unbalance,
     all_candidates,
 )
-from bayes_amb.discrepancy.candidates import VOCABULARY, Candidate
+from bayes_amb.discrepancy.library import VOCABULARY, Candidate
 from bayes_amb.discrepancy.likelihood import scale_shift
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference.offline import dual_youla_eps

@@ -24,7 +24,7 @@ import pytest
 import scipy.io
 
 from bayes_amb.control.pid import PIDSettings, continuous_pid, pid_gains
-from bayes_amb.discrepancy.candidates import BEARING_COEFFICIENTS
+from bayes_amb.discrepancy.library import BEARING_COEFFICIENTS
 from bayes_amb.io.channel_map import map_to_toml
 from bayes_amb.io.daq_export import export_daq, realistic_channel_map
 from bayes_amb.io.recording import load_recording

@@ -26,6 +26,7 @@ from bayes_amb.bench.baselines import (
     naive_eval_us,
     naive_log_likelihood,
 )
+from bayes_amb.bench.recordings import make_recording
 from bayes_amb.bench.results import (
     BenchmarkError,
     LikelihoodBench,
@@ -56,35 +57,6 @@ PARAMS_8 = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
 TRUE_8 = dict(zip(PARAMS_8, (0.1, -0.1, 0.2, 0.5, 0.3, -0.2, 0.1, 0.0), strict=True))
 CHECK_RTOL = 1e-9  # largest relative difference allowed between the two sides
 LIKELIHOOD_TARGET_US = 50.0   # issue 16: one evaluation, 8 parameters, 5000 x 4, batch 32
-
-
-def make_recording(truth: str, params: dict[str, float], dt: float, duration: float,
-                   seed: int = 1, **noise: float) -> Recording:
-    """Closed-loop recording of the reference rig under its reference controller.
-
-    Parameters
-    ----------
-    truth : {"full", "reduced"}
-        Truth plant of the simulation.
-    params : dict
-        True theta values by parameter name.
-    dt, duration : float
-        Sample time and record length, in s.
-    seed : int
-        Seed of the simulation's random streams.
-    **noise : float
-        noise_rms, r1_rms (m), r2_rms (A) (and effects, a tuple of hidden effects),
-        passed to SimulationConfig.
-
-    Returns
-    -------
-    Recording
-    """
-    rig = load_rig()
-    ctrl = export_controller(reference_controller(rig, dt), rig)
-    cfg = SimulationConfig(truth=truth, params=params, dt=dt, duration=duration, seed=seed,
-                           **noise)
-    return simulate_recording(rig, ctrl, cfg)[0]
 
 
 def _posterior(rec: Recording, names: tuple[str, ...]

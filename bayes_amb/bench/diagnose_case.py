@@ -31,7 +31,7 @@ def bench_diagnose(quick: bool = False) -> DiagnoseBench:
     BenchmarkError
         If the diagnosis does not name the hidden actuator lag.
     """
-    from bayes_amb.bench.cases import make_recording
+    from bayes_amb.bench.recordings import make_recording
     from bayes_amb.discrepancy import DiagnoseOptions, diagnose
 
     duration = 0.5 if quick else 2.0

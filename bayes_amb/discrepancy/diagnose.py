@@ -29,12 +29,6 @@ import xarray as xr
 from bayes_amb import __version__
 from bayes_amb.discrepancy.adequacy import judge, nominal_assessment
 from bayes_amb.discrepancy.balancing import balancing, check_planes
-from bayes_amb.discrepancy.candidates import (
-    BEARING_COEFFICIENTS,
-    Candidate,
-    all_candidates,
-    left_out_coefficients,
-)
 from bayes_amb.discrepancy.checks import DataChecks
 from bayes_amb.discrepancy.direct_terms import averaged, direct_companions, with_direct_terms
 from bayes_amb.discrepancy.fitstats import (
@@ -45,6 +39,13 @@ from bayes_amb.discrepancy.fitstats import (
     theta_summary,
 )
 from bayes_amb.discrepancy.fitting import FittedModel, own_noise_fit
+from bayes_amb.discrepancy.library import (
+    BEARING_COEFFICIENTS,
+    Candidate,
+    all_candidates,
+    equivalents_of,
+    left_out_coefficients,
+)
 from bayes_amb.discrepancy.locate import (
     LocateOptions,
     Location,
@@ -330,7 +331,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         explanations.append({**eff, "title": cand.entry.title, "side": cand.entry.side,
                              "score": fm.log_bf, "log_posterior_odds": fm.log_odds,
                              "kind": "model" if cand.nominal_family else "physics",
-                             "equivalence_class": [cand.key, *cand.equivalents()],
+                             "equivalence_class": [cand.key, *(f"{k} ({when})" for k, when
+                                                                 in equivalents_of(cand.key))],
                              "confidence": confidence,
                              "evidence": f"log Bayes factor {fm.log_bf:.1f} against the model "
                                          f"without it (log posterior odds {odds:.1f})"})

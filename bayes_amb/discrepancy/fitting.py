@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from bayes_amb.discrepancy.candidates import Candidate
 from bayes_amb.discrepancy.gauss_newton import gauss_newton, least_squares_start
+from bayes_amb.discrepancy.library import Candidate
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.discrepancy.model_error import ModelError

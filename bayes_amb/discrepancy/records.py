@@ -26,8 +26,8 @@ from typing import Any
 
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
 from bayes_amb.discrepancy.library import make_candidate
-from bayes_amb.inference.consistency import agreement
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.priors import Prior
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.nonfinite import result_json_text

@@ -61,7 +61,6 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayes_amb.discrepancy.candidates import Candidate, SynchronousLine, all_candidates
 from bayes_amb.discrepancy.family import VirtualPlane, member_screens, scan_families
 from bayes_amb.discrepancy.fitting import (
     FittedModel,
@@ -71,6 +70,7 @@ from bayes_amb.discrepancy.fitting import (
     local_fit,
 )
 from bayes_amb.discrepancy.gauss_newton import gauss_newton
+from bayes_amb.discrepancy.library import Candidate, SynchronousLine, all_candidates
 from bayes_amb.discrepancy.library.registry import admissible
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel

@@ -183,13 +183,6 @@ class Candidate:
         (diagnose.py, select.py)."""
         return self.entry.nominal_family
 
-    def equivalents(self) -> tuple[str, ...]:
-        """Explanations that give the same u -> y map as this one and so cannot be told
-        apart from u, y and the excitation, each as 'key (condition)'; reported as its
-        class (from the registry)."""
-        from bayes_amb.discrepancy.library.registry import equivalents_of
-        return tuple(f"{k} ({when})" for k, when in equivalents_of(self.key))
-
     @property
     def key(self) -> str:
         """A unique label, e.g. 'cross_coupling@D1'."""
