@@ -1,13 +1,14 @@
 """Diagnosis across several recordings (issue 29, first path): each record diagnosed, and
 every effect named in one record tested in all the others.
 
-A record that names an effect gives a hypothesis chosen before the other records are
-looked at, so in each other record it is tested alone: that record's nominal model
-extended by that one candidate, its log Bayes factor with prior odds 1 (no multiplicity:
-one pre-specified hypothesis), present when above the diagnosis' threshold (absent when
-the candidate gives no likelihood gain at all, which the search does not refine). An effect
-present in every record is a property of the machine; one present in some records only
-depends on what differs between them (speed, amplitude, time), and the table says which.
+A record that names an effect gives a hypothesis chosen before the other records are looked
+at, so in each other record it is tested alone: that record's nominal model (as its own
+diagnosis fitted it, so no fit is repeated) extended by that one candidate, its log Bayes
+factor with prior odds 1 (no multiplicity: one pre-specified hypothesis), present when
+above the diagnosis' threshold (absent when the candidate gives no likelihood gain at all,
+which the search does not refine). An effect present in every record is a property of the
+machine; one present in some records only depends on what differs between them (speed,
+amplitude, time), and the table says which.
 
 Its size tells more. Where it was fitted in two or more records, the records' posteriors
 of each of its physical quantities are tested for equality (Cochran's Q,
@@ -20,12 +21,14 @@ speed is a seal's or an impeller's (their forces grow with speed), itself a find
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
+from bayes_amb.discrepancy.fitstats import draws, effect_summaries
 from bayes_amb.discrepancy.library import make_candidate
+from bayes_amb.discrepancy.select import try_candidate
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.priors import Prior
@@ -61,6 +64,22 @@ def _key(e: dict[str, Any]) -> str:
     return f"{e['effect']}@{e['location']}"
 
 
+ANY_LOCATION = ("unbalance",)
+"""Effects a record names at whichever location fits best, but whose physics does not
+depend on it: an unbalance at any two shaft nodes with the same resultant and moment gives
+the same lines below the first bending mode (its answer is the two-plane balancing, which
+does not depend on the node named). A record naming one at another node has it."""
+
+
+def _named_elsewhere(key: str, d: Diagnosis) -> dict[str, Any] | None:
+    """The explanation of a record that names the effect of ``key`` at another location,
+    for an effect in ANY_LOCATION (else None)."""
+    effect = key.split("@")[0]
+    if effect not in ANY_LOCATION:
+        return None
+    return next((e for e in d.report["explanations"] if e["effect"] == effect), None)
+
+
 def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] | None = None,
                      priors: dict[str, Prior] | None = None,
                      options: DiagnoseOptions | None = None) -> RecordsDiagnosis:
@@ -82,23 +101,23 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         row: dict[str, Any] = {"effect": key, "named_in": [i + 1 for i in where],
                                "log_bayes_factor": {}, "present": {}}
         sizes: dict[str, dict[str, Any]] = {}
-        for i, (rec, d) in enumerate(zip(recordings, diags, strict=True)):
+        for i, d in enumerate(diags):
             if i in where:
                 e = next(e for e in d.report["explanations"] if _key(e) == key)
                 lbf = e["score"]
                 sizes[str(i + 1)] = e["params"]
             elif d.report["checks"] and any(not c["ok"] for c in d.report["checks"]):
                 lbf = None                              # a failed data check: not tested
+            elif (same := _named_elsewhere(key, d)) is not None:
+                lbf = same["score"]                     # the same physics at another place
+                sizes[str(i + 1)] = same["params"]
             else:
-                alone = diagnose(rec, params, priors, replace(
-                    opt, candidates=(cand,), max_effects=1, sample=False, progress=None,
-                    prescreen=False))
-                c = next((c for c in alone.report["candidates"] if _key(c) == key), None)
-                lbf = None if c is None else c["log_bayes_factor"]
-                fitted = [e for e in alone.report["explanations"] if _key(e) == key]
-                if fitted:
-                    sizes[str(i + 1)] = fitted[0]["params"]
-                if lbf is None and c is not None and (c.get("screen_gain") or 0.0) <= 0.0:
+                fm, c = try_candidate(d.selection.nominal, cand, priors)
+                lbf = c["log_bayes_factor"]
+                if fm is not None:
+                    sizes[str(i + 1)] = effect_summaries(fm, draws(fm, seed=opt.seed))[-1][
+                        "params"]
+                if lbf is None and (c.get("screen_gain") or 0.0) <= 0.0:
                     # no likelihood gain at all: the fit is not refined, the effect absent
                     row["log_bayes_factor"][str(i + 1)] = None
                     row["present"][str(i + 1)] = False

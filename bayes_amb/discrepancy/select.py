@@ -361,6 +361,18 @@ def select(nominal: FittedModel, options: SelectOptions | None = None,
     return Selection(nominal=nominal, final=current, accepted=accepted, scores=scores)
 
 
+def try_candidate(parent: FittedModel, cand: Candidate,
+                  priors: dict[str, Prior] | None = None
+                  ) -> tuple[FittedModel | None, dict[str, Any]]:
+    """One pre-specified candidate on top of a fitted model (a hypothesis from another
+    record, records.py): screened, and fitted fully unless its screening gain is below
+    screen_min. Returns the fitted model (None if not fitted) and its score row."""
+    scores: list[dict[str, Any]] = []
+    fm = _try(parent, [cand], 1, SelectOptions(candidates=(cand,), prescreen=False), priors,
+              None, scores)
+    return fm, scores[0]
+
+
 def posterior_log_odds(log_bf: float, n_candidates: int) -> float:
     """Log posterior odds of one of n_candidates tried against the model without it, each
     with prior odds 1/n_candidates (module docstring, Multiplicity)."""
