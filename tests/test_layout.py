@@ -39,7 +39,7 @@ def _cycle(edges: dict[str, set[str]]) -> list[str] | None:
         stack.append(m)
         for d in sorted(edges[m]):
             if state.get(d) == 1:
-                return stack[stack.index(d):] + [d]
+                return [*stack[stack.index(d):], d]
             if d not in state:
                 found = visit(d)
                 if found:

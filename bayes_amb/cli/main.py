@@ -58,7 +58,7 @@ def _add_optional_commands(sub: argparse._SubParsersAction) -> None:
 
     for name in ("controller_cmd", "simulate_cmd", "identify_cmd", "study_cmd", "bench_cmd",
                  "diagnose_cmd", "library_cmd", "report_cmd", "demo_cmd", "import_cmd", "rig_cmd",
-                 "answers_cmd", "plan_cmd"):
+                 "answers_cmd", "plan_cmd", "compare_cmd"):
         try:
             mod = importlib.import_module(f"bayes_amb.cli.{name}")
         except ModuleNotFoundError as exc:
