@@ -19,6 +19,15 @@ is the single-record answer. Scored here, the only place the truth is read:
   the product of the singles).
 
     PYTHONPATH=. python studies/joint_foreign.py --out runs/joint --groups control=10
+
+With --levels a group is instead one rotor at one speed recorded at two excitation levels
+(LEVELS), the test of issue 29 for a loop that is not linear: a current limit, set once
+so that the first level clips on its drawn share of samples, is caught when the joint
+adequacy fails (a record's linearity check, or the records' disagreement); effect-free
+groups at two levels should stay adequate.
+
+    PYTHONPATH=. python studies/joint_foreign.py --out runs/levels --levels \
+        --groups current_limit=8,control=8
 """
 
 from __future__ import annotations
@@ -39,11 +48,50 @@ from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
 from studies.foreign_benchmark import COEFFICIENTS, _controller_file, kind_number
 from tests.foreign import draw_case, write_case
-from tests.foreign.cases import _controller, conceal
+from tests.foreign.cases import (
+    _controller,
+    calibrate_current_limit,
+    conceal,
+    simulate,
+    truth_record,
+)
 from tests.foreign.habits import draw_habits
+from tests.foreign.write import write_recording
 
 SPEEDS = (0.65, 0.8, 1.0)
 """Speeds of a group, as fractions of the nominal 31 500 rpm."""
+
+LEVELS = (1.0, 0.5)
+"""Excitation levels of a --levels group (fractions of the drawn amplitude), at one speed:
+the test of a loop that is not linear (a current limit set once, at the first level)."""
+
+
+def write_levels(out: Path, kind: str, g: int, seed: int, ctrl: Path) -> list[Path]:
+    """The two recordings of group g of a kind at two excitation levels (LEVELS): one
+    rotor, one speed, its own habits per record; a current limit calibrated once, to its
+    clipped share at the first level, and kept at the second."""
+    rng = np.random.default_rng([seed, g, kind_number(kind), 2])
+    rig = load_rig()
+    spec = draw_case(kind, rng, controller_file=str(ctrl))
+    controller = _controller(spec, None)
+    conc: dict[str, float] = {}
+    if any(e.name == "current_limit" for e in spec.effects):
+        spec, limit = calibrate_current_limit(spec, controller, rng, rig)
+        conc["all"] = limit["y_change_over_noise"]
+    elif spec.effects:
+        spec, conc = conceal(spec, controller, rng, rig)
+    paths = []
+    for level in LEVELS:
+        hab = draw_habits(rng, spec.habits.noise_rms_m)
+        rec = replace(spec, habits=replace(hab, eta_amplitude_a=hab.eta_amplitude_a * level))
+        sim = simulate(rec, controller, rng, rig)
+        name = f"{kind}_{g:02d}_level{round(100 * level):03d}"
+        truth = truth_record(rec, rig, conc, sim.draws)
+        paths.append(write_recording(out / "recordings" / name, rec.dt, sim.y, sim.u, sim.eta,
+                                     rec.speed_rpm, controller.raw,
+                                     notes=f"foreign generator, {kind} at level {level}",
+                                     truth=truth)["csv"])
+    return paths
 
 
 def write_group(out: Path, kind: str, g: int, seed: int, ctrl: Path) -> list[Path]:
@@ -86,7 +134,7 @@ def score(summary: dict[str, Any], theta: dict[str, float]) -> dict[str, Any]:
     return row
 
 
-def run(out: Path, groups: dict[str, int], seed: int) -> None:
+def run(out: Path, groups: dict[str, int], seed: int, levels: bool = False) -> None:
     (out / "joint").mkdir(parents=True, exist_ok=True)
     ctrl = _controller_file(out, 1e-4)
     rows_path = out / "rows.jsonl"
@@ -97,13 +145,16 @@ def run(out: Path, groups: dict[str, int], seed: int) -> None:
             name = f"{kind}_{g:02d}"
             if name in done:
                 continue
-            paths = write_group(out, kind, g, seed, ctrl)
+            paths = (write_levels if levels else write_group)(out, kind, g, seed, ctrl)
             res = identify_joint([load_recording(p) for p in paths], list(COEFFICIENTS))
             write_text_atomic(out / "joint" / f"{name}.json",
                               result_json_text(plain(res.summary, float)))
             truth = json.loads(paths[0].with_suffix(".truth.json").read_text())
             row = {"group": name, "kind": kind, "seconds": res.summary["wall_s"],
                    "adequate": res.summary["adequacy"].get("adequate"),
+                   "records_adequate": [bool((r.get("adequacy") or {}).get("adequate", True))
+                                        for r in res.summary["records"]],
+                   "disagree": res.summary.get("agreement", {}).get("disagree", []),
                    **score(res.summary, truth["theta"])}
             with rows_path.open("a") as fh:
                 fh.write(json.dumps(plain(row, float)) + "\n")
@@ -153,13 +204,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--groups", default="control=10",
                     help="kind=count,... (foreign case kinds; default control=10)")
     ap.add_argument("--seed", type=int, default=29)
+    ap.add_argument("--levels", action="store_true",
+                    help="two excitation levels at one speed (LEVELS) instead of three speeds")
     ap.add_argument("--summary-only", action="store_true")
     a = ap.parse_args(argv)
     if a.summary_only:
         summarise(a.out)
         return 0
     groups = {k: int(v) for k, v in (p.split("=") for p in a.groups.split(","))}
-    run(a.out, groups, a.seed)
+    run(a.out, groups, a.seed, a.levels)
     return 0
 
 
