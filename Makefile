@@ -35,7 +35,7 @@ bench: $(STAMP)
 	$(VENV)/bin/bayes-amb bench
 
 lint: $(STAMP)
-	$(PY) -m ruff check bayes_amb tests
+	$(PY) -m ruff check bayes_amb tests benchmarks studies
 
 clean:
 	rm -rf $(VENV) .pytest_cache build *.egg-info

@@ -46,17 +46,17 @@ from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.nonfinite import plain, result_json_text
 from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
-from studies.foreign_benchmark import COEFFICIENTS, _controller_file, kind_number
-from tests.foreign import draw_case, write_case
-from tests.foreign.cases import (
+from benchmarks.foreign import draw_case, write_case
+from benchmarks.foreign.benchmark import COEFFICIENTS, _controller_file, kind_number
+from benchmarks.foreign.cases import (
     _controller,
     calibrate_current_limit,
     conceal,
     simulate,
     truth_record,
 )
-from tests.foreign.habits import draw_habits
-from tests.foreign.write import write_recording
+from benchmarks.foreign.habits import draw_habits
+from benchmarks.foreign.write import write_recording
 
 SPEEDS = (0.65, 0.8, 1.0)
 """Speeds of a group, as fractions of the nominal 31 500 rpm."""

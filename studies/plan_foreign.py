@@ -1,6 +1,6 @@
 """Issue 30: the plan on the foreign generator's records.
 
-For each effect-free foreign record of a benchmark run (studies/foreign_benchmark.py with
+For each effect-free foreign record of a benchmark run (benchmarks/foreign/benchmark.py with
 --identify), the plan is made as a user with that rig would make it: the record's rig,
 controller, speed and dt, its excitation (a random binary of the record's amplitude at its
 port, its length), and the noise intensities identify fitted on it (`--noise-from`). The

@@ -7,7 +7,7 @@ options. Scored here, the only place the truth is read:
 
 - the group's names: every physics effect named with confidence in at least one record
   whose size, where it was fitted in two or more records, agrees across them (records.py);
-  right when it names the truth's effect (studies/foreign_benchmark.accepted_names);
+  right when it names the truth's effect (benchmarks/foreign/benchmark.accepted_names);
 - clean: an effect-free group whose records all end as "no mismatch" with no name;
 - per record: whether that record alone named the truth (a group where one record alone
   misses it is one where the records together have to make up for it);
@@ -32,7 +32,7 @@ from bayes_amb.discrepancy.records import diagnose_records
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.nonfinite import plain, result_json_text
 from bayes_amb.io.recording import load_recording
-from studies.foreign_benchmark import _controller_file, accepted_names
+from benchmarks.foreign.benchmark import _controller_file, accepted_names
 from studies.joint_foreign import write_group
 
 

@@ -1,4 +1,4 @@
-"""Fixtures shared by the test modules that run the foreign generator (tests/foreign)."""
+"""Fixtures shared by the test modules that run the foreign generator (benchmarks/foreign)."""
 
 from __future__ import annotations
 

@@ -20,7 +20,7 @@ from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.io import load_recording
 from bayes_amb.rig import load_rig
 from bayes_amb.rig.rig import RigError
-from tests.foreign import CaseSpec, Effect, Habits, write_case
+from benchmarks.foreign import CaseSpec, Effect, Habits, write_case
 from tests.helpers import C_NSM, K_THETA
 
 

@@ -70,7 +70,7 @@ def control(ctrl):
 def test_effect_free_recording_raises_no_alarm(control):
     """One effect-free recording gives a clean report with every check passed. This is a
     regression check of one seed, not the false-alarm rate: that rate is measured on the
-    foreign generator's controls (studies/foreign_benchmark.py, README "Diagnosis")."""
+    foreign generator's controls (benchmarks/foreign/benchmark.py, README "Diagnosis")."""
     _, _, d = control
     r = d.report
     assert not r["mismatch"]["detected"]

@@ -1,6 +1,6 @@
 """Issue 27: a seal's direct stiffness and damping are not taken by the bearing coefficients.
 
-A gas seal at a disc (tests/foreign, written apart from the tool) has direct K and C beside
+A gas seal at a disc (benchmarks/foreign, written apart from the tool) has direct K and C beside
 its cross-coupled k. The diagnosis names the cross-coupling; the coefficients are then
 reported with K and C fitted at the same node (discrepancy/direct_terms.py). The truth is
 read only after the tool has answered."""
@@ -14,8 +14,8 @@ import pytest
 from bayes_amb.discrepancy import diagnose
 from bayes_amb.discrepancy.direct_terms import averaged
 from bayes_amb.io.recording import load_recording
-from tests.foreign import Effect
-from tests.foreign.cases import draw_case, write_case
+from benchmarks.foreign import Effect
+from benchmarks.foreign.cases import draw_case, write_case
 
 
 def test_averaging_spans_both_posteriors():

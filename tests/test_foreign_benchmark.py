@@ -1,18 +1,13 @@
-"""The foreign benchmark's scoring (studies/foreign_benchmark.py): right names, equivalence
+"""The foreign benchmark's scoring (benchmarks/foreign/benchmark.py): right names, equivalence
 classes, wrong names and parameter coverage are counted as stated, and can fail."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 
-_SPEC = importlib.util.spec_from_file_location(
-    "foreign_benchmark", Path(__file__).parents[1] / "studies" / "foreign_benchmark.py")
-fb = importlib.util.module_from_spec(_SPEC)
-_SPEC.loader.exec_module(fb)
+from benchmarks.foreign import benchmark as fb
 
 THETA = {"k_Ax": 0.1}
 

@@ -1,4 +1,4 @@
-"""Tests of the foreign recording generator (tests/foreign): independence, identity with the
+"""Tests of the foreign recording generator (benchmarks/foreign): independence, identity with the
 tool's reduced model and forward model, habits and concealment.
 
 Only these tests may import the tool beside the generator (to compare against it).
@@ -20,13 +20,17 @@ import scipy.linalg as sla
 import scipy.signal as sps
 
 from bayes_amb.rig import load_rig
-from tests.foreign import CaseSpec, Effect, Habits, closed_loop, read_controller, rotor
-from tests.foreign.cases import simulate
-from tests.foreign.habits import habit_signals
-from tests.foreign.plant import AXES, dof
+from benchmarks.foreign import CaseSpec, Effect, Habits, closed_loop, read_controller, rotor
+from benchmarks.foreign.cases import simulate
+from benchmarks.foreign.habits import habit_signals
+from benchmarks.foreign.plant import AXES, dof
 from tests.helpers import C_NSM, K_THETA
 
-FOREIGN = Path(__file__).parent / "foreign"
+FOREIGN = Path(__file__).resolve().parents[1] / "benchmarks" / "foreign"
+RUNNER = "benchmark.py"
+"""The benchmark's runner and scorer: it drives the product (diagnose, identify) on the
+generator's recordings, so it is the one module here that imports it; no generator module
+imports the runner."""
 ALLOWED = {"bayes_amb.rig", "bayes_amb.rotor"}
 FORBIDDEN = ("simulate", "discrepancy", "reduction", "uncertainty", "inference", "control")
 
@@ -43,18 +47,19 @@ def _imports(path: Path) -> set[str]:
 
 
 def test_generator_imports_no_tool_stage():
-    files = sorted(FOREIGN.glob("*.py"))
-    assert len(files) >= 6
+    files = sorted(f for f in FOREIGN.glob("*.py") if f.name != RUNNER)
+    assert len(files) >= 6 and (FOREIGN / RUNNER).is_file()
     for f in files:
+        assert "benchmarks.foreign.benchmark" not in _imports(f), f.name
         for mod in _imports(f):
             if mod.startswith("bayes_amb"):
                 assert mod in ALLOWED, f"{f.name} imports {mod}"
-    code = ("import sys, tests.foreign; print(','.join(m for m in sys.modules "
+    code = ("import sys, benchmarks.foreign; print(','.join(m for m in sys.modules "
             "if m.startswith('bayes_amb')))")
     loaded = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                             check=True, cwd=FOREIGN.parent.parent).stdout.strip().split(",")
     bad = [m for m in loaded if any(m.startswith(f"bayes_amb.{s}") for s in FORBIDDEN)]
-    assert not bad, f"importing tests.foreign loads {bad}"
+    assert not bad, f"importing benchmarks.foreign loads {bad}"
     assert "bayes_amb.rotor" in loaded
 
 
@@ -98,7 +103,7 @@ def test_effect_free_reduced_recording_is_reproduced_by_the_tools_forward_model(
     from bayes_amb.inference.forward import ForwardModel
     from bayes_amb.inference.offline import dual_youla_eps
     from bayes_amb.io import load_recording
-    from tests.foreign import write_case
+    from benchmarks.foreign import write_case
     spec = CaseSpec(k_theta=K_THETA, c_nsm=C_NSM, habits=Habits(noise_rms_m=0.0),
                     duration_s=0.5, controller_file=controller_file)
     paths = write_case(spec, tmp_path, "clean", np.random.default_rng(1))
@@ -219,7 +224,7 @@ def _fine_grid_loop(plant, ctrl, eta, tau_a_sub, tau_s_sub, sub=10):
 def test_delays_are_exact_piecewise_integration(controller_file, lines):
     """Fractional delays on both sides (0.3 and 1.2 samples) against a 10x finer grid,
     also with a 1x unbalance and runout (their phase refers to t = 0 of the record)."""
-    from tests.foreign.cases import clean_response, plant_of
+    from benchmarks.foreign.cases import clean_response, plant_of
     rig = load_rig()
     ctrl = read_controller(controller_file)
     spec = _spec(controller_file)
@@ -238,7 +243,7 @@ def test_delays_are_exact_piecewise_integration(controller_file, lines):
 
 
 def test_runout_is_a_1x_line_on_its_own_channel(controller_file):
-    from tests.foreign.cases import clean_response
+    from benchmarks.foreign.cases import clean_response
     rig = load_rig()
     ctrl = read_controller(controller_file)
     base = _spec(controller_file)
@@ -259,7 +264,7 @@ def _frf(A, B, C, f_hz):
 
 
 def _plant(effects, truth="reduced", changed=True):
-    from tests.foreign.cases import plant_of
+    from benchmarks.foreign.cases import plant_of
     spec = (CaseSpec(k_theta=K_THETA, c_nsm=C_NSM, truth=truth) if changed
             else CaseSpec(truth=truth))
     return plant_of(spec, load_rig(), tuple(effects))
@@ -376,11 +381,11 @@ def test_a_rigid_pedestal_changes_nothing_and_a_soft_one_resonates():
 def test_unbalance_force_rotates_forward_at_the_true_speed():
     """Full truth (its force map is invertible): the oscillator states reproduce
     u Omega^2 [cos, sin](Omega t + phi) as the force the rotor feels (rotor rows of A)."""
-    from tests.foreign.plant import node_of
+    from benchmarks.foreign.plant import node_of
     rig = load_rig()
     u, ph, rpm = 2e-5, 0.7, 31000.0
     spec = CaseSpec(k_theta=K_THETA, c_nsm=C_NSM, speed_rpm_true=rpm, truth="full")
-    from tests.foreign.cases import plant_of
+    from benchmarks.foreign.cases import plant_of
     p = plant_of(spec, rig, (Effect("unbalance", {"planes": [
         {"node": "D2", "u_kgm": u, "phase_rad": ph}]}),))
     R = rotor(rig, rpm, "full")
@@ -403,7 +408,7 @@ def test_unbalance_force_rotates_forward_at_the_true_speed():
 def test_line_phases_refer_to_the_start_of_the_record(controller_file):
     """With and without a burn-in, a runout and an unbalance give the same steady 1x
     signal in the record: their phases are those of the truth at t = 0 of the record."""
-    from tests.foreign.cases import clean_response
+    from benchmarks.foreign.cases import clean_response
     effects = (Effect("runout", {"channel": "Bx", "amplitude_m": 2e-7, "phase_rad": 0.4}),
                Effect("unbalance", {"planes": [{"node": 5, "u_kgm": 1e-5, "phase_rad": 2.0}]}))
     spec = replace(_spec(controller_file, burn_in_s=0.37, eta_amplitude_a=0.0),
@@ -449,7 +454,7 @@ def _limit(i_max, recorded="command"):
 def test_a_current_limit_clips_the_amplifier_as_a_reference_loop_does(controller_file):
     """eta 0.3 A with the limit at 0.35 A: the loop (open-loop form with the clip) agrees
     with a plain reference recursion, and differs from the linear loop."""
-    from tests.foreign.cases import clean_response, plant_of
+    from benchmarks.foreign.cases import clean_response, plant_of
     rig = load_rig()
     ctrl = read_controller(controller_file)
     spec = _spec(controller_file)
@@ -480,7 +485,7 @@ def test_an_unreachable_current_limit_is_the_linear_run(controller_file):
 
 @pytest.mark.parametrize("recorded", ["command", "coil"])
 def test_the_current_limit_is_calibrated_to_its_clipped_share(controller_file, recorded):
-    from tests.foreign.cases import calibrate_current_limit
+    from benchmarks.foreign.cases import calibrate_current_limit
     rig = load_rig()
     ctrl = read_controller(controller_file)
     spec = replace(_spec(controller_file, noise_rms_m=5e-8, amp_offset_a=(0.03, 0, 0, 0),
@@ -510,7 +515,7 @@ def _seal(K=0.0, k=0.0, C=0.0, c=0.0, node="D2"):
 def test_a_seal_is_the_node_impedance_of_its_coefficients():
     """Full truth: G_seal = G0 - G_yn Z (I + G_nn Z)^-1 G_nu (a force -Z q at the node fed
     back through the seal-free plant), Z = [[K + sC, k + sc], [-(k + sc), K + sC]]."""
-    from tests.foreign.plant import node_of
+    from benchmarks.foreign.plant import node_of
     rig = load_rig()
     K, k, C, c = 2e5, 6e4, 40.0, 8.0
     p0, p1 = _plant((), truth="full"), _plant((_seal(K, k, C, c, node=20),), truth="full")
@@ -540,7 +545,7 @@ def test_seal_energy_direct_damping_dissipates_cross_coupling_feeds_forward_whir
     """The seal force recovered from the state matrix (full truth): with C alone its power
     f.v on the node is -C |v|^2 <= 0 for any motion; with k alone, on a forward circular
     whirl (x, y) = r (cos, sin)(w t), it is +k r^2 w > 0 (the destabilising sign)."""
-    from tests.foreign.plant import node_of
+    from benchmarks.foreign.plant import node_of
     rig = load_rig()
     e = _seal(C=50.0) if coef == "C" else _seal(k=5e4)
     p0, p1 = _plant((), truth="full", changed=False), _plant((e,), truth="full", changed=False)
@@ -569,7 +574,7 @@ def test_ks_drift_is_a_staircase_centred_on_theta(controller_file):
     """Each step's plant is the constant plant at theta + rate (mid-point - t_ref); the
     steps' mean over the record is theta; before the first switch the drifting run is the
     constant run at the first step's value; rate 0 is the plain run."""
-    from tests.foreign.cases import clean_response, loops, plant_of
+    from benchmarks.foreign.cases import clean_response, loops, plant_of
     rig = load_rig()
     ctrl = read_controller(controller_file)
     spec = replace(_spec(controller_file), duration_s=0.2)
@@ -612,8 +617,8 @@ def test_the_process_force_is_band_limited_with_its_rms():
 
 
 def test_the_process_force_acts_at_its_disc_as_a_reference_loop_does(controller_file):
-    from tests.foreign.cases import plant_of
-    from tests.foreign.loop import run_segments
+    from benchmarks.foreign.cases import plant_of
+    from benchmarks.foreign.loop import run_segments
     rig = load_rig()
     ctrl = read_controller(controller_file)
     spec = _spec(controller_file)
@@ -633,7 +638,7 @@ def test_the_process_force_acts_at_its_disc_as_a_reference_loop_does(controller_
 
 
 def test_new_kinds_draw_their_family():
-    from tests.foreign import draw_case
+    from benchmarks.foreign import draw_case
     for kind, name in (("current_limit", "current_limit"), ("seal", "seal"),
                        ("ks_drift", "ks_drift"), ("pedestal", "pedestal")):
         spec = draw_case(kind, np.random.default_rng(28))

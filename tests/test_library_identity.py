@@ -1,4 +1,4 @@
-"""Identity tests of the physics library against the foreign generator (tests/foreign).
+"""Identity tests of the physics library against the foreign generator (benchmarks/foreign).
 
 Every candidate, at the true values of its physical parameters, reproduces the foreign
 generator's noise-free recording of its effect sample by sample: eps computed from the
@@ -6,7 +6,7 @@ recorded y and u by the tool's offline filter equals the extended model's predic
 S(theta, phi) x (plus its 1x lines), with all eight bearing coefficients off nominal. The
 generator was written apart from the library (continuous-time state augmentations, exact
 piecewise integration of delays, a continuous oscillator for the lines), so agreement is an
-independent check. The library never imports tests.foreign; this test may.
+independent check. The library never imports benchmarks.foreign; this test may.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.io import load_recording
 from bayes_amb.rig import load_rig
-from tests.foreign import CaseSpec, Effect, Habits, write_case
+from benchmarks.foreign import CaseSpec, Effect, Habits, write_case
 from tests.helpers import C_NSM, K_THETA
 
 NAMES = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")

@@ -121,7 +121,7 @@ def test_cli_lists_the_library(capsys):
 def test_other_vocabularies_are_the_registrys():
     from bayes_amb.simulate import EFFECT_DEFAULTS
     from bayes_amb.studies.concealed import SINGLE
-    from tests.foreign import HELD_OUT, IN_FAMILY
+    from benchmarks.foreign import HELD_OUT, IN_FAMILY
     assert set(EFFECT_DEFAULTS) <= set(VOCABULARY)
     assert set(SINGLE) == set(EFFECT_DEFAULTS)
     foreign = {FOREIGN_ALIASES.get(n, n) for n in IN_FAMILY}

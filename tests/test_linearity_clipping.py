@@ -3,7 +3,7 @@
 A clipping amplifier is a nonlinearity the tool must report, never absorb: the check
 fails, the limit it estimates is the generator's, and with the clip modelled the eight
 bearing coefficients come back inside their intervals. The same draws without the limit
-pass the check. The generator is tests/foreign (written apart from the tool); its truth is
+pass the check. The generator is benchmarks/foreign (written apart from the tool); its truth is
 read only here, after the tool has answered."""
 
 import json
@@ -15,7 +15,7 @@ import pytest
 from bayes_amb.discrepancy.adequacy import nominal_assessment
 from bayes_amb.discrepancy.library.bearing_coefficient import BEARING_COEFFICIENTS
 from bayes_amb.io.recording import load_recording
-from tests.foreign.cases import draw_case, write_case
+from benchmarks.foreign.cases import draw_case, write_case
 
 
 def _record(tmp_path, controller_file, recorded: str | None, seed: int = 31):

@@ -37,7 +37,7 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
-from tests.foreign.effects import ContinuousPlant
+from benchmarks.foreign.effects import ContinuousPlant
 
 _Y = ("y_Ax", "y_Ay", "y_Bx", "y_By")
 _ETA = ("eta_Ax", "eta_Ay", "eta_Bx", "eta_By")

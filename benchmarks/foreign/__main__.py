@@ -1,7 +1,7 @@
 """Write a foreign benchmark suite from the command line.
 
     bayes-amb controller --dt 1e-4 --export ctrl.json
-    python -m tests.foreign OUT_DIR --controller ctrl.json [--seed 1] [--scale 1]
+    python -m benchmarks.foreign OUT_DIR --controller ctrl.json [--seed 1] [--scale 1]
 
 The default suite has 90 recordings: 10 controls, 4 of each of the 10 in-family single
 effects, 10 pairs, 6 held-out (pedestal), 4 full-truth, then (issue 27) 5 controls with a
@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import argparse
 
-from tests.foreign.cases import IN_FAMILY, write_suite
+from benchmarks.foreign.cases import IN_FAMILY, write_suite
 
 DEFAULT_SUITE = {"control": 10, **dict.fromkeys(IN_FAMILY, 4), "pair": 10, "held_out": 6,
                  "full_truth": 4, "control_force": 5, "current_limit": 5, "seal": 5,
@@ -23,7 +23,7 @@ DEFAULT_SUITE = {"control": 10, **dict.fromkeys(IN_FAMILY, 4), "pair": 10, "held
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m tests.foreign", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m benchmarks.foreign", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("out_dir")
     ap.add_argument("--controller", required=True, help="controller file (JSON)")

@@ -37,7 +37,7 @@ def write_recording(stem: str | os.PathLike[str], dt: float, y: NDArray, u: NDAr
             "rig": "reference", "controller": controller,
             "excitation": {"columns": ["eta"], "injected_at": {"eta": "youla_port"}},
             "units": {"t": "s", "y": "m", "u": "A", "eta": "A"}, "notes": notes,
-            "provenance": {"generator": "tests.foreign (independent of bayes_amb.simulate)"}}
+            "provenance": {"generator": "benchmarks.foreign (independent of bayes_amb.simulate)"}}
     paths["json"].write_text(json.dumps(side, indent=1), encoding="utf-8")
     if truth is not None:
         paths["truth"] = Path(f"{stem}.truth.json")

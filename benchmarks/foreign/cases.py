@@ -23,11 +23,17 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.rig import Rig, load_rig
-from tests.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
-from tests.foreign.habits import Habits, draw_force, draw_habits, habit_signals
-from tests.foreign.loop import ClosedLoop, Controller, closed_loop, read_controller, run_segments
-from tests.foreign.plant import AXES, bearing_changes, rotor
-from tests.foreign.write import write_recording
+from benchmarks.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
+from benchmarks.foreign.habits import Habits, draw_force, draw_habits, habit_signals
+from benchmarks.foreign.loop import (
+    ClosedLoop,
+    Controller,
+    closed_loop,
+    read_controller,
+    run_segments,
+)
+from benchmarks.foreign.plant import AXES, bearing_changes, rotor
+from benchmarks.foreign.write import write_recording
 
 IN_FAMILY = tuple(n for n in EFFECT_PARAMS if n not in HELD_OUT)
 """Single effects the benchmark draws as kinds (besides 'control', 'control_force', 'pair',

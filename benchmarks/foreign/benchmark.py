@@ -1,13 +1,13 @@
 """The concealed-effect benchmark on the foreign generator (issue 14).
 
-Recordings are made by tests/foreign, a simulator written apart from bayes_amb (its own
+Recordings are made by benchmarks/foreign, a simulator written apart from bayes_amb (its own
 plant, effects as continuous-time state augmentations, real-record habits: offsets, drift,
 a mid-operation start, coloured noise, mains lines; all eight bearing coefficients off
 nominal), written to disk in the documented recording format, and diagnosed exactly as a
 user would: ``diagnose(load_recording(csv))`` with default options. The truth file is read
 only by the scoring below, after the diagnosis.
 
-    PYTHONPATH=. .venv/bin/python studies/foreign_benchmark.py --out runs/foreign \
+    .venv/bin/python -m benchmarks.foreign.benchmark --out runs/foreign \
         [--per-kind 4] [--kinds control,actuator_lag,...] [--seed 1] [--duration 2]
         [--counts control=20,control_force=10,current_limit=6,seal=6,ks_drift=6]
         [--identify]
@@ -52,9 +52,9 @@ from bayes_amb.io.atomic import json_text, write_text_atomic
 from bayes_amb.io.nonfinite import plain, read_result_json, result_json_line, result_json_text
 from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
-from tests.foreign import CaseSpec, Effect, draw_case, read_controller, write_case
-from tests.foreign.cases import clean_response
-from tests.foreign.plant import AXES
+from benchmarks.foreign import CaseSpec, Effect, draw_case, read_controller, write_case
+from benchmarks.foreign.cases import clean_response
+from benchmarks.foreign.plant import AXES
 
 DEFAULT_KINDS = ("control", "actuator_lag", "actuator_delay", "sensor_delay", "sensor_gain",
                  "cross_coupling", "unbalance", "actuator_2nd", "sensor_lag",

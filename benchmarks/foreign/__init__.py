@@ -8,7 +8,7 @@ real records. It must not import bayes_amb.simulate, .discrepancy, .reduction,
 .uncertainty, .inference or .control (a test checks the imports).
 """
 
-from tests.foreign.cases import (
+from benchmarks.foreign.cases import (
     IN_FAMILY,
     KINDS,
     CaseSpec,
@@ -20,10 +20,10 @@ from tests.foreign.cases import (
     write_case,
     write_suite,
 )
-from tests.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
-from tests.foreign.habits import Habits, draw_habits
-from tests.foreign.loop import closed_loop, read_controller, run
-from tests.foreign.plant import bearing_changes, rotor
+from benchmarks.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
+from benchmarks.foreign.habits import Habits, draw_habits
+from benchmarks.foreign.loop import closed_loop, read_controller, run
+from benchmarks.foreign.plant import bearing_changes, rotor
 
 __all__ = ["EFFECT_PARAMS", "HELD_OUT", "IN_FAMILY", "KINDS", "CaseSpec", "Effect", "Habits",
            "Simulated", "bearing_changes", "build_plant", "closed_loop", "conceal",

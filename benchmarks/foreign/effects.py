@@ -25,7 +25,7 @@ Effect names and parameters (``Effect(name, params)``):
 - ``sensor_lag``: ``bandwidth_hz``, ``where`` ('A', 'B', 'all'). Probe electronics:
   s' = wb (y - s), the probe delivers s.
 - ``actuator_delay``: ``delay_s`` (s, any fraction of samples). The current acts delay_s
-  after it is commanded (handled exactly in :mod:`tests.foreign.loop`).
+  after it is commanded (handled exactly in :mod:`benchmarks.foreign.loop`).
 - ``sensor_delay``: ``delay_s``. The sample at t_k holds y_s(t_k - delay_s).
 - ``actuator_gain``: ``axis`` (Ax..By), ``gain`` (-): ki_true = (1 + gain) ki on that axis.
 - ``sensor_gain``: ``channel``, ``gain``: the probe delivers (1 + gain) y on that channel.
@@ -44,9 +44,9 @@ Effect names and parameters (``Effect(name, params)``):
   that bearing, mounted on the housing, measure q_s - z.
 - ``current_limit`` (held out, nonlinear): ``i_max_a`` (A), ``recorded`` ('command' or
   'coil'), ``clipped_share_target``. The amplifiers deliver clip(w, -i_max, i_max): a
-  sample-level saturation, run by :func:`tests.foreign.loop.run_segments` (the plant here
+  sample-level saturation, run by :func:`benchmarks.foreign.loop.run_segments` (the plant here
   only carries ``i_max_a``). The DAQ records the controller's command or the coil current
-  (see :mod:`tests.foreign.cases`).
+  (see :mod:`benchmarks.foreign.cases`).
 - ``seal`` (held out): ``node`` ('D1', 'D2' or a node number), ``k_direct_nm`` K (N/m),
   ``k_cross_nm`` k (N/m), ``c_direct_nsm`` C (N s/m), ``c_cross_nsm`` c (N s/m). An
   annular gas seal's reaction force at the node,
@@ -57,7 +57,7 @@ Effect names and parameters (``Effect(name, params)``):
   ks_true(t) = (1 - theta - rate (t - t_ref)) ks, theta the case's k_<axis>, so theta is
   the value at t_ref (mid-record: the record mean). Played as a staircase of
   ``segment_s`` steps, each step's value that of its mid-point (see
-  :mod:`tests.foreign.cases`); the plant here is one step's.
+  :mod:`benchmarks.foreign.cases`); the plant here is one step's.
 
 - ``probe_angle`` (held out): ``bearing`` ('A', 'B'), ``angle_deg`` (deg). The probe pair
   of that bearing is mounted turned by the angle against the actuator axes (a real rig's
@@ -66,7 +66,7 @@ Effect names and parameters (``Effect(name, params)``):
   [q_x, q_y], after the probes' own dynamics and gain (rows of C and D mixed).
 
 Flexible modes are not an effect here but the choice of truth (full, or reduced with
-bending pairs; see :mod:`tests.foreign.plant`).
+bending pairs; see :mod:`benchmarks.foreign.plant`).
 """
 
 from __future__ import annotations
@@ -79,7 +79,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.rig import Rig
-from tests.foreign.plant import AXES, RotorBlock, dof, node_of
+from benchmarks.foreign.plant import AXES, RotorBlock, dof, node_of
 
 EFFECT_PARAMS: dict[str, tuple[str, ...]] = {
     "actuator_lag": ("bandwidth_hz", "where"),
