@@ -71,6 +71,15 @@ the same lines below the first bending mode (its answer is the two-plane balanci
 does not depend on the node named). A record naming one at another node has it."""
 
 
+def _size_of(e: dict[str, Any], d: Diagnosis) -> dict[str, Any]:
+    """The physical size of a record's explanation for the agreement across records: its
+    parameters, or for an unbalance its two-plane balancing answer (u per correction
+    plane, which does not depend on the node the search named; the u at that node does)."""
+    if e["effect"] in ANY_LOCATION and (d.report.get("balancing") or {}).get("planes"):
+        return {f"u_{pl['plane']}": pl["u_kgm"] for pl in d.report["balancing"]["planes"]}
+    return e["params"]
+
+
 def _named_elsewhere(key: str, d: Diagnosis) -> dict[str, Any] | None:
     """The explanation of a record that names the effect of ``key`` at another location,
     for an effect in ANY_LOCATION (else None)."""
@@ -105,16 +114,18 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
             if i in where:
                 e = next(e for e in d.report["explanations"] if _key(e) == key)
                 lbf = e["score"]
-                sizes[str(i + 1)] = e["params"]
+                sizes[str(i + 1)] = _size_of(e, d)
             elif d.report["checks"] and any(not c["ok"] for c in d.report["checks"]):
                 lbf = None                              # a failed data check: not tested
             elif (same := _named_elsewhere(key, d)) is not None:
                 lbf = same["score"]                     # the same physics at another place
-                sizes[str(i + 1)] = same["params"]
+                sizes[str(i + 1)] = _size_of(same, d)
             else:
                 fm, c = try_candidate(d.selection.nominal, cand, priors)
                 lbf = c["log_bayes_factor"]
-                if fm is not None:
+                if fm is not None and cand.effect not in ANY_LOCATION:
+                    # (an unbalance's size is its balancing answer, which only a
+                    # diagnosis naming it has)
                     sizes[str(i + 1)] = effect_summaries(fm, draws(fm, seed=opt.seed))[-1][
                         "params"]
                 if lbf is None and (c.get("screen_gain") or 0.0) <= 0.0:
@@ -132,10 +143,11 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
     return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings])
 
 
-SIZE_QUANTITIES = {"unbalance": ("u_kgm",), "runout": ("amplitude_m",),
+SIZE_QUANTITIES = {"unbalance": ("u_kgm", "u_*"), "runout": ("amplitude_m",),
                    "cross_coupling": ("kxy",)}
-"""The physical quantities whose agreement across records is read (phases are left out:
-a record without a once-per-revolution reference starts at any angle)."""
+"""The physical quantities whose agreement across records is read ('u_*': the u of every
+balancing plane; phases are left out: a record without a once-per-revolution reference
+starts at any angle)."""
 
 
 def size_agreement(key: str, sizes: dict[str, dict[str, Any]], speeds: list[float]
@@ -149,6 +161,11 @@ def size_agreement(key: str, sizes: dict[str, dict[str, Any]], speeds: list[floa
     if len(sizes) < 2 or not quantities:
         return None
     recs = sorted(sizes, key=int)
+    shared = set.intersection(*(set(sizes[r]) for r in recs))
+    quantities = sorted(q for q in shared if q in quantities
+                        or any(p.endswith("*") and q.startswith(p[:-1]) for p in quantities))
+    if not quantities:
+        return None
     means = {q: [sizes[r][q]["mean"] for r in recs] for q in quantities}
     sds = {q: [(sizes[r][q]["hdi90"][1] - sizes[r][q]["hdi90"][0]) / 3.29 for r in recs]
            for q in quantities}
