@@ -59,3 +59,27 @@ def test_a_seals_direct_terms_are_fitted_beside_its_cross_coupling(seal_case):
     for name in ("k_Bx", "k_By"):
         p = report["parameters_after"][name]
         assert p["hdi90"][0] <= truth["theta"][name] <= p["hdi90"][1], (name, p)
+
+
+def test_a_mid_span_seal_is_moved_to_its_node(controller_file, tmp_path):
+    """A seal at node 23, three nodes from the mid-span candidate n20: the search names it
+    at n20 and moves it node by node, with its direct terms, to where the fit peaks
+    (select.refine_node); the nodes within 2 nats of the best are reported and hold the
+    seal's; no second force is named for the remainder."""
+    rng = np.random.default_rng(5)
+    spec = draw_case("control", rng, controller_file=controller_file, duration_s=1.0)
+    seal = Effect("seal", {"node": 23, "k_direct_nm": 2.0e5, "k_cross_nm": 5.0e5,
+                           "c_direct_nsm": 300.0, "c_cross_nsm": 20.0})
+    paths = write_case(replace(spec, effects=(seal,)), tmp_path, "mid", rng,
+                       conceal_effects=False)
+    report = diagnose(load_recording(paths["csv"])).report
+    (e,) = report["explanations"]
+    assert e["effect"] == "cross_coupling"
+    node = int(e["location"][1:])
+    a, b = (int(n[1:]) for n in e["node_range"])    # nodes as good as the named one
+    assert a <= 23 <= b and a <= node <= b and b - a <= 4
+    moves = [c for c in report["candidates"] if str(c["round"]).endswith("node")]
+    assert {c["location"] for c in moves} >= {f"n{n}" for n in range(21, node + 1)}
+    assert [d["location"] for d in report["direct_terms"]] == [e["location"]]
+    lo, hi = e["params"]["kxy"]["hdi90"]
+    assert lo <= 5.0e5 <= hi

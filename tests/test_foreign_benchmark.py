@@ -230,3 +230,23 @@ def test_a_seals_cross_coupling_is_right_only_at_its_node():
     assert at_scan["effect_params_in_hdi"] == [True, True, False]
     off = fb.score(_truth(("seal", {**seal, "node": 5}), kind="seal"), scan)
     assert off["wrong_confident"] == ["cross_coupling@n20"]
+
+
+def test_a_node_range_names_every_node_in_it():
+    """A force moved along the shaft reports the nodes that fit as well (node_range): a
+    seal at node 23 named at n24 with range n22-n26 is right; the same name with a range
+    n24-n25, or none, is wrong."""
+    seal = {"node": 23, "k_direct_nm": 2e5, "k_cross_nm": 3e5, "c_direct_nsm": 200.0,
+            "c_cross_nsm": 20.0}
+    t = _truth(("seal", seal), kind="seal")
+
+    def named(rng):
+        r = _report(("cross_coupling", "n24", {"kxy": {"hdi90": [2.8e5, 3.2e5]}},
+                     "confident", []))
+        if rng:
+            r["explanations"][0]["node_range"] = rng
+        return fb.score(t, r)
+
+    assert named(["n22", "n26"])["all_named"] and not named(["n22", "n26"])["wrong"]
+    assert named(["n24", "n25"])["wrong_confident"] == ["cross_coupling@n24"]
+    assert named(None)["wrong_confident"] == ["cross_coupling@n24"]

@@ -100,6 +100,8 @@ def format_report(r: dict) -> str:
                            f"{v['unit']}" for k, v in e["params"].items())
             cls = e.get("equivalence_class", [])
             same = f"; cannot be told from {', '.join(cls[1:])}" if len(cls) > 1 else ""
+            if e.get("node_range") and e["node_range"][0] != e["node_range"][1]:
+                same += f"; nodes {e['node_range'][0]}-{e['node_range'][1]} fit as well"
             lines.append(f"explanation   : {e['effect']} at {e['location']}: {ps} "
                          f"(log BF {e['score']:.1f}, {e.get('confidence', 'confident')}{same})")
     else:

@@ -334,6 +334,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                              "equivalence_class": [cand.key, *(f"{k} ({when})" for k, when
                                                                  in equivalents_of(cand.key))],
                              "confidence": confidence,
+                             **({"node_range": [f"n{n}" for n in fm.node_range]}
+                                if fm.node_range else {}),
                              "evidence": f"log Bayes factor {fm.log_bf:.1f} against the model "
                                          f"without it (log posterior odds {odds:.1f})"})
     mismatch = loc.to_dict()

@@ -53,6 +53,8 @@ class FittedModel:
     model_error: ModelError | None = None   # the band-wise model error, once assessed
     extra_cov: NDArray | None = None    # (p, p) what the fit modelled but does not know
     #                                     exactly (a modelled clip), added to every interval
+    node_range: list[int] | None = None  # a shaft-node force: the nodes as good as its
+    #                                     own (select.refine_node)
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -213,4 +215,4 @@ def own_noise_fit(fm: FittedModel) -> FittedModel:
     idx = np.arange(fm.forward.slices[-1].start, fm.forward.slices[-1].stop)
     cov = free_covariance(post, x, last=idx.size)
     return FittedModel(fm.candidates, fm.forward, like, post, x, log_post, cov=cov,
-                       log_bf=fm.log_bf, log_odds=fm.log_odds)
+                       log_bf=fm.log_bf, log_odds=fm.log_odds, node_range=fm.node_range)

@@ -71,6 +71,7 @@ from bayes_amb.discrepancy.fitting import (
 )
 from bayes_amb.discrepancy.gauss_newton import gauss_newton
 from bayes_amb.discrepancy.library import Candidate, SynchronousLine, all_candidates
+from bayes_amb.discrepancy.library.cross_coupling import DirectTerms
 from bayes_amb.discrepancy.library.registry import admissible
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
@@ -79,6 +80,7 @@ from bayes_amb.inference.estimate import (
     LogPosterior,
 )
 from bayes_amb.inference.priors import Prior
+from bayes_amb.rig import node_label
 
 log = logging.getLogger(__name__)
 
@@ -356,9 +358,86 @@ def select(nominal: FittedModel, options: SelectOptions | None = None,
                 break
         if chosen is None:
             break
+        chosen = refine_node(current, chosen, priors, rnd, scores, progress)
         accepted.append(chosen)
         current = chosen
     return Selection(nominal=nominal, final=current, accepted=accepted, scores=scores)
+
+
+NODE_FREE = ("unbalance",)
+"""Node effects whose node is not refined: an unbalance's answer is its two-plane
+balancing, the same from any node with the same resultant and moment (records.py)."""
+
+
+def refine_node(parent: FittedModel, chosen: FittedModel,
+                priors: dict[str, Prior] | None = None, rnd: int = 0,
+                scores: list[dict[str, Any]] | None = None,
+                progress: Callable[[str], None] | None = None) -> FittedModel:
+    """A force named at a shaft node is moved to the neighbouring node that explains the
+    data better, one node at a time while its Bayes factor (against the same parent)
+    rises: the default candidates sit at a few nodes only (the discs, mid-span), and a
+    seal two nodes away from the mid-span node otherwise leaves a remainder that a later
+    round names as a second, wrong force. Effects in NODE_FREE and effects not at a shaft
+    node are returned as they are; every neighbour tried is appended to ``scores`` with
+    round '<rnd> node'. The moved effect keeps the prior odds of its round."""
+    cand = chosen.candidates[-1]
+    k = node_label(cand.location)
+    if k is None or cand.effect in NODE_FREE or chosen.log_bf is None:
+        return chosen
+    n_nodes = parent.forward.recording.rig.n_nodes
+    fit = {k: _with_companion(parent, cand, priors)}
+    for step in (-1, 1):
+        node = k
+        # walk while the fit rises, and on past the best until it has fallen NODE_NATS
+        # below it, so that every node within NODE_NATS of the best is seen (node_range)
+        while 1 <= node + step <= n_nodes and fit[node] > max(fit.values()) - NODE_NATS:
+            node += step
+            alt = replace(cand, location=f"n{node}")
+            fit[node] = _with_companion(parent, alt, priors)
+            if scores is not None:
+                scores.append({"effect": alt.effect, "location": alt.location,
+                               "round": f"{rnd} node", "screen_gain": None,
+                               "log_bayes_factor": None, "log_posterior_odds": None,
+                               "log_posterior_gain": _num(fit[node] - fit[k]),
+                               "fingerprint": alt.fingerprint, "instead_of": cand.key})
+    best_node = max(fit, key=fit.get)
+    chosen.node_range = _within(fit, NODE_NATS)
+    if best_node == k:
+        return chosen
+    alt = replace(cand, location=f"n{best_node}")
+    best = refine(parent, screen(parent, alt, priors), priors)
+    if best.log_bf is None:
+        return chosen
+    best.log_odds = chosen.log_odds + (best.log_bf - chosen.log_bf)
+    best.node_range = chosen.node_range
+    if progress:
+        progress(f"round {rnd}: {cand.key} moved to {best.candidates[-1].key}")
+    return best
+
+
+NODE_NATS = 2.0
+"""Log posterior below the best node within which a node is as good a place for the
+force: the reported node range (a log Bayes factor of 2 is not worth more than a bare
+mention)."""
+
+
+def _within(fit: dict[int, float], nats: float) -> list[int]:
+    """[first, last] node whose fit is within ``nats`` of the best."""
+    top = max(fit.values())
+    near = [n for n, v in fit.items() if v >= top - nats]
+    return [min(near), max(near)]
+
+
+def _with_companion(parent: FittedModel, cand: Candidate,
+                    priors: dict[str, Prior] | None) -> float:
+    """The MAP log posterior of parent + a node force with the direct terms it carries (a
+    seal's or impeller's K and C at the same node, direct_terms.py): the force's node is
+    chosen with them, as its coefficients are reported with them."""
+    extra = (cand, DirectTerms("direct_terms", cand.location)) \
+        if cand.effect == "cross_coupling" else (cand,)
+    fwd, _, post = extend(parent, extra, priors)
+    _, log_post = local_fit(post, _embed(parent, fwd))
+    return log_post
 
 
 def try_candidate(parent: FittedModel, cand: Candidate,

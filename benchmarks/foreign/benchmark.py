@@ -191,6 +191,9 @@ def _class(expl: dict[str, Any]) -> set[str]:
     """An explanation's key and its declared equivalents ('key (condition)' entries)."""
     keys = {f"{expl['effect']}@{expl['location']}"}
     keys |= {str(k).split(" ")[0] for k in expl.get("equivalence_class", [])}
+    if expl.get("node_range"):          # the nodes the diagnosis says fit as well
+        a, b = (int(n[1:]) for n in expl["node_range"])
+        keys |= {f"{expl['effect']}@n{k}" for k in range(a, b + 1)}
     return keys | {f"{expl['effect']}@*"}
 
 
