@@ -94,12 +94,15 @@ def write_levels(out: Path, kind: str, g: int, seed: int, ctrl: Path) -> list[Pa
     return paths
 
 
-def write_group(out: Path, kind: str, g: int, seed: int, ctrl: Path) -> list[Path]:
-    """The three recordings of group g of a kind (module doc); returns their CSV paths."""
+def write_group(out: Path, kind: str, g: int, seed: int, ctrl: Path,
+                band: tuple[float, float] = (0.2, 1.0)) -> list[Path]:
+    """The three recordings of group g of a kind (module doc); returns their CSV paths.
+    ``band``: the concealment its effect is brought into at the nominal speed (the
+    generator's default; a weaker band makes groups where a slow record misses it)."""
     rng = np.random.default_rng([seed, g, kind_number(kind)])
     spec = draw_case(kind, rng, controller_file=str(ctrl))
     if spec.effects:
-        spec, _ = conceal(spec, _controller(spec, None), rng, load_rig())
+        spec, _ = conceal(spec, _controller(spec, None), rng, load_rig(), band=band)
     paths = []
     for f in SPEEDS:
         rpm = spec.speed_rpm * f
