@@ -100,3 +100,17 @@ def test_detectability_matches_the_diagnosis(rig_ctrl):
     weak = detectability(*rig_ctrl, Design(duration=2.0), Noise(noise_rms=5e-8),
                          parse_effect("sensor_gain:gain=0.0005,channel=By"))
     assert not weak["detected"] and weak["probability_detected"] < 0.1
+
+
+def test_the_prediction_is_averaged_over_excitation_records():
+    """The mean of the sd (what identify reports on each record), the root mean square of
+    the spread (the variance of the estimates over records is the mean of each record's),
+    informed only when informed on every record; physical sd scaled with the sd."""
+    from bayes_amb.planning.plan import over_realisations
+    runs = [{"k_By": {"sd": s, "physical_sd": 1e6 * s, "sd_of_estimates": e, "unit": "N/m",
+                      "prior_sd": 0.46, "informed": inf}}
+            for s, e, inf in ((0.01, 0.01, True), (0.03, 0.05, True), (0.02, 0.0, False))]
+    out = over_realisations(runs)["k_By"]
+    assert out["sd"] == pytest.approx(0.02) and out["physical_sd"] == pytest.approx(2e4)
+    assert out["sd_of_estimates"] == pytest.approx(np.sqrt((1e-4 + 25e-4) / 3))
+    assert out["informed"] is False and out["unit"] == "N/m"
