@@ -406,8 +406,9 @@ def refine_node(parent: FittedModel, chosen: FittedModel,
         return chosen
     alt = replace(cand, location=f"n{best_node}")
     best = refine(parent, screen(parent, alt, priors), priors)
-    if best.log_bf is None:
-        return chosen
+    if best.log_bf is None or not np.isfinite(best.log_bf):
+        chosen.node_range = None    # no Laplace evidence at the better node: stay, and
+        return chosen               # claim no range the named node is not in
     best.log_odds = chosen.log_odds + (best.log_bf - chosen.log_bf)
     best.node_range = chosen.node_range
     if progress:
