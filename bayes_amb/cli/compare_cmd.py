@@ -23,7 +23,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="size of a change that matters, in the parameters' units, one for "
                         "all or per parameter (default 0.1: 10 %% of ks, 100 N s/m)")
     p.add_argument("--out", default=None, metavar="FILE",
-                   help="also write the comparison as JSON to FILE, atomically (default: print only)")
+                   help="also write the comparison as JSON to FILE, atomically (default: "
+                        "print only)")
     p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 
