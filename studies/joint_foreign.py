@@ -47,7 +47,12 @@ from bayes_amb.io.nonfinite import plain, result_json_text
 from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
 from benchmarks.foreign import draw_case, write_case
-from benchmarks.foreign.benchmark import COEFFICIENTS, _controller_file, kind_number
+from benchmarks.foreign.benchmark import (
+    COEFFICIENTS,
+    _controller_file,
+    coefficient_coverage,
+    kind_number,
+)
 from benchmarks.foreign.cases import (
     _controller,
     calibrate_current_limit,
@@ -117,18 +122,18 @@ def write_group(out: Path, kind: str, g: int, seed: int, ctrl: Path,
     return paths
 
 
+def _coverage(params: dict[str, Any], theta: dict[str, float]) -> dict[str, Any]:
+    """The benchmark's coverage of the eight coefficients, a width it cannot give as NaN."""
+    return {n: {**v, "width": np.nan if v["width"] is None else v["width"]}
+            for n, v in coefficient_coverage(theta, params).items()}
+
+
 def score(summary: dict[str, Any], theta: dict[str, float]) -> dict[str, Any]:
     """Coverage and widths of one group's joint summary (module doc)."""
-    row: dict[str, Any] = {"joint": {}, "single": [], "ratio": {}, "ratio_product": {}}
-    for n in COEFFICIENTS:
-        lo, hi = summary["parameters"][n]["hdi90"]
-        row["joint"][n] = {"inside": bool(lo <= theta[n] <= hi), "width": hi - lo}
-    for rec in summary["records"]:
-        own = {}
-        for n in COEFFICIENTS:
-            lo, hi = rec["parameters"][n]["hdi90"]
-            own[n] = {"inside": bool(lo <= theta[n] <= hi), "width": hi - lo}
-        row["single"].append(own)
+    row: dict[str, Any] = {"joint": _coverage(summary["parameters"], theta),
+                           "single": [_coverage(rec["parameters"], theta)
+                                      for rec in summary["records"]],
+                           "ratio": {}, "ratio_product": {}}
     for n in COEFFICIENTS:
         widths = np.array([s[n]["width"] for s in row["single"]])
         row["ratio"][n] = float(np.mean(widths) / row["joint"][n]["width"])
@@ -137,12 +142,41 @@ def score(summary: dict[str, Any], theta: dict[str, float]) -> dict[str, Any]:
     return row
 
 
+def done_groups(rows_path: Path) -> set[str]:
+    """The groups a run already has (a study resumes where it stopped)."""
+    if not rows_path.is_file():
+        return set()
+    return {json.loads(line)["group"] for line in rows_path.read_text().splitlines()}
+
+
+def append_row(rows_path: Path, row: dict[str, Any]) -> None:
+    """One group's row, appended as one line."""
+    with rows_path.open("a") as fh:
+        fh.write(json.dumps(plain(row, float)) + "\n")
+
+
+def rows_by_kind(out: Path) -> tuple[list[dict[str, Any]], dict[str, list[dict[str, Any]]]]:
+    """Every row of a run, and the rows per case kind."""
+    rows = [json.loads(line) for line in (out / "rows.jsonl").read_text().splitlines()]
+    by_kind: dict[str, list[dict[str, Any]]] = {}
+    for r in rows:
+        by_kind.setdefault(r["kind"], []).append(r)
+    return rows, by_kind
+
+
+def write_summary(out: Path, lines: list[str], table: dict[str, Any]) -> None:
+    """OUT/summary.md (the table) and OUT/summary.json, and the table printed."""
+    text = "\n".join(lines)
+    write_text_atomic(out / "summary.md", text + "\n")
+    write_text_atomic(out / "summary.json", json.dumps(table, indent=1) + "\n")
+    print(text)
+
+
 def run(out: Path, groups: dict[str, int], seed: int, levels: bool = False) -> None:
     (out / "joint").mkdir(parents=True, exist_ok=True)
     ctrl = _controller_file(out, 1e-4)
     rows_path = out / "rows.jsonl"
-    done = ({json.loads(line)["group"] for line in rows_path.read_text().splitlines()}
-            if rows_path.is_file() else set())
+    done = done_groups(rows_path)
     for kind, count in groups.items():
         for g in range(count):
             name = f"{kind}_{g:02d}"
@@ -159,8 +193,7 @@ def run(out: Path, groups: dict[str, int], seed: int, levels: bool = False) -> N
                                         for r in res.summary["records"]],
                    "disagree": res.summary.get("agreement", {}).get("disagree", []),
                    **score(res.summary, truth["theta"])}
-            with rows_path.open("a") as fh:
-                fh.write(json.dumps(plain(row, float)) + "\n")
+            append_row(rows_path, row)
             inside = sum(v["inside"] for v in row["joint"].values())
             print(f"{name}: joint {inside}/8 inside, width ratio "
                   f"{np.median(list(row['ratio'].values())):.2f}, "
@@ -169,10 +202,7 @@ def run(out: Path, groups: dict[str, int], seed: int, levels: bool = False) -> N
 
 
 def summarise(out: Path) -> dict[str, Any]:
-    rows = [json.loads(line) for line in (out / "rows.jsonl").read_text().splitlines()]
-    by_kind: dict[str, list] = {}
-    for r in rows:
-        by_kind.setdefault(r["kind"], []).append(r)
+    rows, by_kind = rows_by_kind(out)
     table = {}
     lines = ["| groups | joint inside | singles inside | width ratio single/joint "
              "(median, range) | joint / product of singles (median) | adequate |",
@@ -194,10 +224,7 @@ def summarise(out: Path) -> dict[str, Any]:
                      f"{t['ratio_median']:.2f} ({t['ratio_range'][0]:.2f}-"
                      f"{t['ratio_range'][1]:.2f}) | {t['product_median']:.2f} | "
                      f"{t['adequate']}/{len(rs)} |")
-    text = "\n".join(lines)
-    write_text_atomic(out / "summary.md", text + "\n")
-    write_text_atomic(out / "summary.json", json.dumps(table, indent=1) + "\n")
-    print(text)
+    write_summary(out, lines, table)
     return table
 
 

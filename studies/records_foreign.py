@@ -35,7 +35,13 @@ from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.nonfinite import plain, result_json_text
 from bayes_amb.io.recording import load_recording
 from benchmarks.foreign.benchmark import _controller_file, accepted_names
-from studies.joint_foreign import write_group
+from studies.joint_foreign import (
+    append_row,
+    done_groups,
+    rows_by_kind,
+    write_group,
+    write_summary,
+)
 
 
 def _keys(key: str) -> set[str]:
@@ -73,8 +79,7 @@ def run(out: Path, groups: dict[str, int], seed: int,
     (out / "records").mkdir(parents=True, exist_ok=True)
     ctrl = _controller_file(out, 1e-4)
     rows_path = out / "rows.jsonl"
-    done = ({json.loads(line)["group"] for line in rows_path.read_text().splitlines()}
-            if rows_path.is_file() else set())
+    done = done_groups(rows_path)
     for kind, count in groups.items():
         for g in range(count):
             name = f"{kind}_{g:02d}"
@@ -93,8 +98,7 @@ def run(out: Path, groups: dict[str, int], seed: int,
                    "single_s": float(sum(r["wall_s"] for r in reports)),
                    "verdicts": [r["verdict"] for r in reports],
                    **score(truth, result, reports)}
-            with rows_path.open("a") as fh:
-                fh.write(json.dumps(plain(row, float)) + "\n")
+            append_row(rows_path, row)
             print(f"{name}: names {row['names']} right={row['right']} wrong={row['wrong']} "
                   f"records right {row['records_right']} time x{wall / row['single_s']:.2f}",
                   flush=True)
@@ -102,10 +106,7 @@ def run(out: Path, groups: dict[str, int], seed: int,
 
 
 def summarise(out: Path) -> dict[str, Any]:
-    rows = [json.loads(line) for line in (out / "rows.jsonl").read_text().splitlines()]
-    by_kind: dict[str, list] = {}
-    for r in rows:
-        by_kind.setdefault(r["kind"], []).append(r)
+    _, by_kind = rows_by_kind(out)
     lines = ["| kind: groups | named right | wrong names | clean | a record alone missed "
              "it | time / sum of single |", "|---|---|---|---|---|---|"]
     table = {}
@@ -121,10 +122,7 @@ def summarise(out: Path) -> dict[str, Any]:
                      f"{'–' if effect else t['clean']} | "
                      f"{t['ambiguous'] if effect else '–'} | {t['time_ratio_median']:.2f} "
                      f"(max {t['time_ratio_max']:.2f}) |")
-    text = "\n".join(lines)
-    write_text_atomic(out / "summary.md", text + "\n")
-    write_text_atomic(out / "summary.json", json.dumps(table, indent=1) + "\n")
-    print(text)
+    write_summary(out, lines, table)
     return table
 
 

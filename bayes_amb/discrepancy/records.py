@@ -28,7 +28,7 @@ from typing import Any
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
 from bayes_amb.discrepancy.fitstats import draws, effect_summaries
 from bayes_amb.discrepancy.library import make_candidate
-from bayes_amb.discrepancy.select import try_candidate
+from bayes_amb.discrepancy.select import NODE_FREE, try_candidate
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.priors import Prior
@@ -64,27 +64,20 @@ def _key(e: dict[str, Any]) -> str:
     return f"{e['effect']}@{e['location']}"
 
 
-ANY_LOCATION = ("unbalance",)
-"""Effects a record names at whichever location fits best, but whose physics does not
-depend on it: an unbalance at any two shaft nodes with the same resultant and moment gives
-the same lines below the first bending mode (its answer is the two-plane balancing, which
-does not depend on the node named). A record naming one at another node has it."""
-
-
 def _size_of(e: dict[str, Any], d: Diagnosis) -> dict[str, Any]:
     """The physical size of a record's explanation for the agreement across records: its
     parameters, or for an unbalance its two-plane balancing answer (u per correction
     plane, which does not depend on the node the search named; the u at that node does)."""
-    if e["effect"] in ANY_LOCATION and (d.report.get("balancing") or {}).get("planes"):
+    if e["effect"] in NODE_FREE and (d.report.get("balancing") or {}).get("planes"):
         return {f"u_{pl['plane']}": pl["u_kgm"] for pl in d.report["balancing"]["planes"]}
     return e["params"]
 
 
 def _named_elsewhere(key: str, d: Diagnosis) -> dict[str, Any] | None:
     """The explanation of a record that names the effect of ``key`` at another location,
-    for an effect in ANY_LOCATION (else None)."""
+    for an effect in NODE_FREE (else None)."""
     effect = key.split("@")[0]
-    if effect not in ANY_LOCATION:
+    if effect not in NODE_FREE:
         return None
     return next((e for e in d.report["explanations"] if e["effect"] == effect), None)
 
@@ -123,7 +116,7 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
             else:
                 fm, c = try_candidate(d.selection.nominal, cand, priors)
                 lbf = c["log_bayes_factor"]
-                if fm is not None and cand.effect not in ANY_LOCATION:
+                if fm is not None and cand.effect not in NODE_FREE:
                     # (an unbalance's size is its balancing answer, which only a
                     # diagnosis naming it has)
                     sizes[str(i + 1)] = effect_summaries(fm, draws(fm, seed=opt.seed))[-1][

@@ -365,21 +365,27 @@ def select(nominal: FittedModel, options: SelectOptions | None = None,
 
 
 NODE_FREE = ("unbalance",)
-"""Node effects whose node is not refined: an unbalance's answer is its two-plane
-balancing, the same from any node with the same resultant and moment (records.py)."""
+"""Node effects whose node is not physics: an unbalance at any two shaft nodes with the
+same resultant and moment gives the same lines below the first bending mode, and its
+answer is the two-plane balancing, the same from any node. Their node is not refined here,
+and across records (records.py) one named at another node counts as the same effect."""
 
 
 def refine_node(parent: FittedModel, chosen: FittedModel,
                 priors: dict[str, Prior] | None = None, rnd: int = 0,
                 scores: list[dict[str, Any]] | None = None,
                 progress: Callable[[str], None] | None = None) -> FittedModel:
-    """A force named at a shaft node is moved to the neighbouring node that explains the
-    data better, one node at a time while its Bayes factor (against the same parent)
-    rises: the default candidates sit at a few nodes only (the discs, mid-span), and a
-    seal two nodes away from the mid-span node otherwise leaves a remainder that a later
-    round names as a second, wrong force. Effects in NODE_FREE and effects not at a shaft
-    node are returned as they are; every neighbour tried is appended to ``scores`` with
-    round '<rnd> node'. The moved effect keeps the prior odds of its round."""
+    """A force named at a shaft node is moved to the node where it fits best: the default
+    candidates sit at a few nodes only (the discs, mid-span), and a seal two nodes away
+    from the mid-span node otherwise leaves a remainder that a later round names as a
+    second, wrong force. The neighbours are fitted one node at a time in each direction,
+    with the direct terms a node force carries (_with_companion), on past the best until
+    the fit has fallen NODE_NATS below it; the nodes within NODE_NATS of the best become
+    ``node_range``. The chosen node is then refitted and scored as the search does, and
+    keeps the prior odds of its round; without a finite Bayes factor there the force stays
+    where it was, with no range. Effects in NODE_FREE and effects not at a shaft node are
+    returned as they are; every neighbour tried is appended to ``scores`` with round
+    '<rnd> node'."""
     cand = chosen.candidates[-1]
     k = node_label(cand.location)
     if k is None or cand.effect in NODE_FREE or chosen.log_bf is None:

@@ -241,12 +241,11 @@ def _check_agreement(summary: dict[str, Any], own: list[IdentificationResult],
     summary["agreement"] = found
     if not found["disagree"]:
         return
-    base = own[0].map
     for n in found["disagree"]:
         row = found["parameters"][n]
-        one = replace(base, theta=np.array([row["random_effects_mean"]]))
-        summary["parameters"][n] = _laplace_summary(
-            (n,), one, np.array([[row["random_effects_sd"] ** 2]]), rig)[n]
+        one = replace(own[0].map, theta=np.array([row["random_effects_mean"]]))
+        summary["parameters"][n] = _summary(
+            [n], one, np.array([[row["random_effects_sd"] ** 2]]), rig)[n]
     ad = summary["adequacy"]
     ad["adequate"] = False
     ad["line"] = ("model NOT adequate for one shared posterior: " + found["line"]

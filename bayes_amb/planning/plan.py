@@ -15,6 +15,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import signal as sps
 
+from bayes_amb.discrepancy.library.bearing_coefficient import BEARING_COEFFICIENTS
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.io.controller_file import ControllerFile
@@ -23,8 +24,6 @@ from bayes_amb.planning.fisher import Information, fisher_information, log10_sig
 from bayes_amb.rig import Rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 from bayes_amb.uncertainty import get_spec, parse_param_list
-
-BEARING_COEFFICIENTS = tuple(f"{g}_{b}{a}" for g in "kc" for b in "AB" for a in "xy")
 
 NOT_INFORMED = 0.5
 """A predicted sd (or spread of the estimates) above this share of the prior sd: the
