@@ -192,8 +192,7 @@ def over_realisations(runs: list[dict[str, dict[str, Any]]]) -> dict[str, dict[s
     for n, first in runs[0].items():
         sd = float(np.mean([r[n]["sd"] for r in runs]))
         out[n] = {**first, "sd": sd,
-                  "physical_sd": sd * first["physical_sd"] / first["sd"]
-                  if first["sd"] > 0 and np.isfinite(first["sd"]) else first["physical_sd"],
+                  "physical_sd": float(np.mean([r[n]["physical_sd"] for r in runs])),
                   "sd_of_estimates": float(np.sqrt(np.mean([r[n]["sd_of_estimates"] ** 2
                                                             for r in runs]))),
                   "informed": all(r[n]["informed"] for r in runs)}
