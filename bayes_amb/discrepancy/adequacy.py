@@ -153,7 +153,7 @@ def assess_fit(recording: Recording, names: tuple[str, ...],
     verdict = judge(checks, loc, worst_nrmse(nominal, eps))
     if not verdict.adequate:
         nominal.model_error = model_error(nominal.like, nominal.x, nominal.p, nominal.cov,
-                                          nominal.names)
+                                          nominal.names, robust=True)
     return verdict, nominal
 
 

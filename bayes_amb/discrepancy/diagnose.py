@@ -313,10 +313,16 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         for i, fm in enumerate({id(m): m for m in (nominal, reported)}.values()):
             say(f"sampling the posterior of model {i + 1}")
             _sample(fm, opt.steps, opt.seed + i)
-    say("integrating the model error out of the posteriors")
-    for fm in {id(m): m for m in (nominal, reported)}.values():
-        fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names)
     after = fit_quality(sel.final, eps)
+    adequacy = judge(checks, loc, max(before["nrmse"].values()), advice=NOMINAL_ADVICE)
+    adequacy_after = judge(checks, final_loc, max(after["nrmse"].values()),
+                           advice=FINAL_ADVICE)
+    say("integrating the model error out of the posteriors")
+    doubted = {id(nominal): not adequacy.adequate}
+    doubted[id(reported)] = not adequacy_after.adequate
+    for fm in {id(m): m for m in (nominal, reported)}.values():
+        fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names,
+                                     robust=doubted[id(fm)])
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
     all_effects = effect_summaries(reported, s_fin)
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
@@ -361,10 +367,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                                      "compared (start-up transient of a record that does "
                                      "not start at rest, or of removed offsets)"},
         "verdict": _verdict(checks, loc, sel.accepted, unexplained, substitutes),
-        "adequacy": judge(checks, loc, max(before["nrmse"].values()),
-                          advice=NOMINAL_ADVICE).to_dict(),
-        "adequacy_after": judge(checks, final_loc, max(after["nrmse"].values()),
-                                advice=FINAL_ADVICE).to_dict(),
+        "adequacy": adequacy.to_dict(),
+        "adequacy_after": adequacy_after.to_dict(),
         "mismatch": mismatch,
         "explanations": explanations,
         "unexplained": unexplained,

@@ -32,6 +32,18 @@ delay): measured on six foreign recordings, the band sandwich left the coverage 
 full-order truth unchanged. Leaving the failing bands out (the third option) throws away
 the bands that inform the damping most; the discrepancy keeps them with their weight
 capped.
+
+When the location tests doubt the fitted model (``robust=True``), the band sandwich is
+added as a floor: C_s = C M C with M = sum_d s_d s_d^T the outer products of the bands'
+scores s_d = -2 Re sum_k J_k^H W_k R_k at the MAP (under the model E[M] = H, so C_s <= C).
+A missing physics that makes the bands want different parameter values (a support
+resonance in the rigid-body band: the bands below and above it pull the bearing
+stiffness apart) shows there even when the discrepancy's Schur complement leaves the
+informative bands untouched. The reported covariance is the Loewner maximum of C_w and
+C_s (C_w^1/2 max(I, C_w^-1/2 C_s C_w^-1/2) C_w^1/2): never narrower than C_w, wider only
+in the directions in which the bands disagree more than the model error allows. Only a
+doubted model gets it: on an adequate one the sandwich's own scatter (few informative
+bands) would widen intervals at random.
 """
 
 from __future__ import annotations
@@ -70,6 +82,7 @@ class ModelError:
     cov: NDArray
     sd_ratio: dict[str, float]
     shift: NDArray
+    sandwich_ratio: dict[str, float] | None = None
 
     @property
     def widened(self) -> bool:
@@ -79,7 +92,11 @@ class ModelError:
         return {"method": "band-wise output-multiplicative discrepancy (4 x 4 per band, "
                           "hierarchical scale per band group), integrated out at the MAP",
                 "tau": [float(t) for t in self.tau], "group_hz": self.group_hz,
-                "sd_ratio": self.sd_ratio, "widened": self.widened}
+                "sd_ratio": self.sd_ratio, "widened": self.widened,
+                **({"sandwich_ratio": self.sandwich_ratio,
+                    "sandwich": "band scores' outer products, Loewner maximum with the "
+                                "discrepancy's covariance (the model is doubted)"}
+                   if self.sandwich_ratio is not None else {})}
 
 
 def _real_design(Y: NDArray) -> NDArray:
@@ -110,10 +127,21 @@ def _fit_tau(z2: list[NDArray], h: list[NDArray]) -> float:
     return 0.0 if neg(np.log(1e-7)) <= res.fun + 1e-9 else t
 
 
+def _loewner_max(A: NDArray, B: NDArray) -> NDArray:
+    """The smallest covariance (in the ordering the eigenvalues of A^-1/2 B A^-1/2 define)
+    that is at least A and at least B: A^1/2 max(I, A^-1/2 B A^-1/2) A^1/2."""
+    K = np.linalg.cholesky(A)
+    Ki = np.linalg.inv(K)
+    lam, V = np.linalg.eigh(Ki @ (0.5 * (B + B.T)) @ Ki.T)
+    out = K @ (V * np.maximum(lam, 1.0)) @ V.T @ K.T
+    return 0.5 * (out + out.T)
+
+
 def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
-                names: tuple[str, ...]) -> ModelError | None:
+                names: tuple[str, ...], robust: bool = False) -> ModelError | None:
     """Widen the Laplace covariance ``cov`` of the fitted model at ``x`` (parameters first,
-    p of them, then log10 sigma) by the band-wise model error (module docstring).
+    p of them, then log10 sigma) by the band-wise model error (module docstring); with
+    ``robust`` (the location tests doubt the model) the band sandwich is its floor.
 
     ``like`` is a WhittleLikelihood (identification) or RobustWhittle (diagnosis); only the
     free parameters (positive variance in ``cov``) are touched. None without a covariance.
@@ -140,6 +168,7 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
     freq = like.k / (like.n * like.forward.dt)
     q = free.size
     parts = []
+    meat = np.zeros((free.size, free.size))
     for idx in bands:
         Jd, Wd, Rd = J[idx], W[idx], R0[idx]
         Dd = _real_design(X[idx])
@@ -153,6 +182,8 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
         with np.errstate(divide="ignore", invalid="ignore"):
             zhat = np.where(hv > 0, z / np.where(hv > 0, hv, 1.0), 0.0)   # U^T phi_hat
         parts.append((H_tp, hv, U, zhat ** 2, z))
+        s_theta = -2 * np.einsum("kci,kcd,kd->i", Jd.conj(), Wd, Rd).real
+        meat += np.outer(s_theta, s_theta)
     n_groups = int(np.ceil(len(bands) / GROUP))
     tau = np.zeros(n_groups)
     loss = np.zeros((q, q))
@@ -182,5 +213,18 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
         # the bands' pull that the discrepancy now explains is taken off theta
         # (one Newton step of the marginal posterior from the MAP)
         shift[free] = Cw @ pull
+    sandwich_ratio = None
+    if robust and K is not None:
+        C = cov[np.ix_(free, free)]
+        Cs = C @ meat @ C
+        widened = new[np.ix_(free, free)]
+        try:
+            new[np.ix_(free, free)] = _loewner_max(widened, Cs)
+        except np.linalg.LinAlgError:
+            pass
+        else:
+            sandwich_ratio = {names[j]: float(np.sqrt(Cs[i, i] / C[i, i]))
+                              for i, j in enumerate(free)}
     sd_ratio = {names[j]: float(np.sqrt(new[j, j] / cov[j, j])) for j in free}
-    return ModelError(tau=tau, group_hz=group_hz, cov=new, sd_ratio=sd_ratio, shift=shift)
+    return ModelError(tau=tau, group_hz=group_hz, cov=new, sd_ratio=sd_ratio, shift=shift,
+                      sandwich_ratio=sandwich_ratio)
