@@ -34,8 +34,9 @@ the bands that inform the damping most; the discrepancy keeps them with their we
 capped.
 
 When the location tests doubt the fitted model (``robust=True``), the band sandwich is
-added as a floor: C_s = C M C with M = sum_d s_d s_d^T the outer products of the bands'
-scores s_d = -2 Re sum_k J_k^H W_k R_k at the MAP (under the model E[M] = H, so C_s <= C).
+added as a floor: C_s = C M C with M the sum of the outer products of the bands' scores
+s_d = -2 Re sum_k J_k^H W_k R_k at the MAP, each corrected for its band's leverage
+(band_sandwich: under the model E[C_s] = C).
 A missing physics that makes the bands want different parameter values (a support
 resonance in the rigid-body band: the bands below and above it pull the bearing
 stiffness apart) shows there even when the discrepancy's Schur complement leaves the
@@ -137,6 +138,28 @@ def _loewner_max(A: NDArray, B: NDArray) -> NDArray:
     return 0.5 * (out + out.T)
 
 
+LEVERAGE_CAP = 0.95
+"""Largest share of the information in any direction that one band's leverage correction
+credits to it (caps the correction of a parameter a single band informs at sd x 4.5)."""
+
+
+def band_sandwich(C: NDArray, band_scores: list[tuple[NDArray, NDArray]]) -> NDArray:
+    """Cluster-robust covariance of the MAP, bands as clusters, from the bands' scores s_d
+    and curvatures H_d at the MAP. The plain sandwich C (sum s_d s_d^T) C averages
+    (1 - q / G_eff) C on a right model (the scores sum to zero at the MAP: G_eff
+    informative bands, q parameters); each score is therefore first scaled by its band's
+    leverage, s~_d = (I - L_d)^-1/2 s_d in the coordinates C^1/2 whitens, L_d = C^1/2 H_d
+    C^1/2 (the CR2 correction, Bell & McCaffrey 2002), which makes it average C on a linear
+    model with the noise model right."""
+    K = np.linalg.cholesky(C)
+    meat = np.zeros_like(C)
+    for s_d, H_d in band_scores:
+        lev, V = np.linalg.eigh(K.T @ (0.5 * (H_d + H_d.T)) @ K)
+        u = V @ ((V.T @ (K.T @ s_d)) / np.sqrt(1.0 - np.clip(lev, 0.0, LEVERAGE_CAP)))
+        meat += np.outer(u, u)
+    return K @ meat @ K.T
+
+
 def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
                 names: tuple[str, ...], robust: bool = False) -> ModelError | None:
     """Widen the Laplace covariance ``cov`` of the fitted model at ``x`` (parameters first,
@@ -168,7 +191,7 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
     freq = like.k / (like.n * like.forward.dt)
     q = free.size
     parts = []
-    meat = np.zeros((free.size, free.size))
+    band_scores = []
     for idx in bands:
         Jd, Wd, Rd = J[idx], W[idx], R0[idx]
         Dd = _real_design(X[idx])
@@ -182,8 +205,8 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
         with np.errstate(divide="ignore", invalid="ignore"):
             zhat = np.where(hv > 0, z / np.where(hv > 0, hv, 1.0), 0.0)   # U^T phi_hat
         parts.append((H_tp, hv, U, zhat ** 2, z))
-        s_theta = -2 * np.einsum("kci,kcd,kd->i", Jd.conj(), Wd, Rd).real
-        meat += np.outer(s_theta, s_theta)
+        band_scores.append((-2 * np.einsum("kci,kcd,kd->i", Jd.conj(), Wd, Rd).real,
+                            2 * np.einsum("kci,kcd,kdj->ij", Jd.conj(), Wd, Jd).real))
     n_groups = int(np.ceil(len(bands) / GROUP))
     tau = np.zeros(n_groups)
     loss = np.zeros((q, q))
@@ -216,7 +239,7 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
     sandwich_ratio = None
     if robust and K is not None:
         C = cov[np.ix_(free, free)]
-        Cs = C @ meat @ C
+        Cs = band_sandwich(C, band_scores)
         widened = new[np.ix_(free, free)]
         try:
             new[np.ix_(free, free)] = _loewner_max(widened, Cs)
