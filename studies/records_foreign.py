@@ -5,8 +5,9 @@ once at the nominal speed, recorded at 0.65, 0.8 and 1.0 x 31 500 rpm with its o
 per record. Each group is diagnosed as a user would: `diagnose_records` with default
 options. Scored here, the only place the truth is read:
 
-- the group's names: every physics effect named with confidence in at least one record
-  whose size, where it was fitted in two or more records, agrees across them (records.py);
+- the group's names: every physics effect named with confidence in at least one record,
+  or named by the records together (records.joint_search), whose size, where it was
+  fitted in two or more records, agrees across them (records.py);
   right when it names the truth's effect (benchmarks/foreign/benchmark.accepted_names);
 - clean: an effect-free group whose records all end as "no mismatch" with no name;
 - per record: whether that record alone named the truth (a group where one record alone
@@ -53,7 +54,8 @@ def group_names(result: dict[str, Any], reports: list[dict[str, Any]]) -> list[s
     confident = {f"{e['effect']}@{e['location']}" for r in reports for e in r["explanations"]
                  if e.get("kind", "physics") == "physics"
                  and e.get("confidence") == "confident"}
-    return [row["effect"] for row in result["across"] if row["effect"] in confident
+    return [row["effect"] for row in result["across"]
+            if (row["effect"] in confident or row.get("named_jointly"))
             and (row.get("size") is None or row["size"]["agree"])]
 
 

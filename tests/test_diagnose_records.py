@@ -3,6 +3,7 @@ every other: present where the physics is, absent where it is not."""
 
 import json
 
+import numpy as np
 import pytest
 
 from bayes_amb.control.export import export_controller, reference_controller
@@ -68,3 +69,41 @@ def test_a_1x_size_that_changes_with_speed_points_to_the_other_1x_effect():
     assert out["records"] == [1, 3] and "speed-dependent" in out["reading"]
     assert size_agreement("actuator_lag@A", kxy, speeds) is None
     assert size_agreement("unbalance@n14", {"1": same["1"]}, speeds) is None
+
+
+def _screened(gains: dict[str, float]) -> object:
+    """A record's diagnosis as joint_search reads it: no failed check, nothing accepted,
+    its last round's screens with these gains."""
+    from types import SimpleNamespace
+    rows = [{"effect": k.split("@")[0], "location": k.split("@")[1], "round": 1,
+             "screen_gain": g} for k, g in gains.items()]
+    return SimpleNamespace(report={"checks": [], "candidates": rows},
+                           selection=SimpleNamespace(accepted=[]))
+
+
+@pytest.mark.parametrize(("lbf", "named"), [(2.0, True), (0.5, False)])
+def test_the_records_together_name_what_none_names_alone(monkeypatch, lbf, named):
+    """Three records each screen a weak cross-coupling at D1 (gain 2.5, below what one
+    record accepts) and a sensor gain (0.5). The summed screens point to D1 only; fitted in
+    each record with log BF 2 (each below the threshold 3) the joint log BF 6 minus log K
+    (K = 2 candidates) passes: named together, present in no record alone. With log BF 0.5
+    each it does not. An effect a record named already is not searched again."""
+    from bayes_amb.discrepancy import records
+    from bayes_amb.discrepancy.diagnose import DiagnoseOptions
+    fitted = []
+
+    def tested(d, key, priors, seed, force=False, parent="nominal"):
+        fitted.append((key, force, parent))
+        return lbf, None, True
+
+    monkeypatch.setattr(records, "_tested_in", tested)
+    diags = [_screened({"cross_coupling@D1": 2.5, "sensor_gain@Ax": 0.5})] * 3
+    rows = records.joint_search(diags, set(), None, DiagnoseOptions(), [2e4, 2.5e4, 3e4])
+    assert [r["effect"] for r in rows] == ["cross_coupling@D1"]
+    assert fitted == [("cross_coupling@D1", True, "final")] * 3
+    row = rows[0]
+    assert row["joint_log_bayes_factor"] == pytest.approx(3 * lbf)
+    assert row["joint_log_posterior_odds"] == pytest.approx(3 * lbf - np.log(2))
+    assert row["named_jointly"] is named and not any(row["present"].values())
+    assert records.joint_search(diags, {"cross_coupling@A"}, None, DiagnoseOptions(),
+                                [2e4, 2.5e4, 3e4]) == []

@@ -189,8 +189,15 @@ def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -
                                            "no gain" if row["present"][k] is False
                                            else "not tested")
                        for k, v in row["log_bayes_factor"].items())
-        lines.append(f"{row['effect']}: named in record(s) "
-                     f"{','.join(map(str, row['named_in']))}; log Bayes factor {bf}; "
+        if row["named_in"]:
+            where = f"named in record(s) {','.join(map(str, row['named_in']))}"
+        else:
+            odds = row["joint_log_posterior_odds"]
+            where = (("named by the records together" if row["named_jointly"] else
+                      "not named, even by the records together")
+                     + " (joint log posterior odds "
+                     + (f"{odds:.1f})" if odds is not None else "not computed)"))
+        lines.append(f"{row['effect']}: {where}; log Bayes factor {bf}; "
                      + ("present in every record" if row["in_every_record"]
                         else "NOT in every record")
                      + (f"; size: {row['size']['reading']}" if row.get("size") else ""))

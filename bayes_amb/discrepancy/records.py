@@ -17,6 +17,18 @@ the same amplitude at the probe; a 1x line fitted as the wrong one of the two ha
 that changes with speed (a runout read as unbalance needs u ~ 1 / Omega^2), so a size that
 disagrees across speeds says the name is wrong. A cross-coupling whose kxy changes with
 speed is a seal's or an impeller's (their forces grow with speed), itself a finding.
+
+Together the records can name what none names alone (joint_search). Each record's last
+round screened every physics candidate on top of what that record's diagnosis accepted;
+the screens' likelihood gains add up across records. A candidate of an effect no record
+named whose summed gain could pass the threshold (sum of gains - log K > threshold, K the
+candidates of a round) is fitted in every record on top of its accepted effects, and its
+log Bayes factors are added: the Bayes factor of "this effect is in every
+record, with a size of its own in each" against "in none", the records being independent.
+With the prior odds 1/K each record's search uses, it is named when that joint log
+posterior odds passes the same threshold. At most JOINT_FITS candidates are fitted, the
+best by summed gain, so the search costs a few fits per record, and only when the screens
+point somewhere.
 """
 
 from __future__ import annotations
@@ -28,7 +40,7 @@ from typing import Any
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
 from bayes_amb.discrepancy.fitstats import draws, effect_summaries
 from bayes_amb.discrepancy.library import make_candidate
-from bayes_amb.discrepancy.select import NODE_FREE, try_candidate
+from bayes_amb.discrepancy.select import NODE_FREE, posterior_log_odds, try_candidate
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.priors import Prior
@@ -82,11 +94,99 @@ def _named_elsewhere(key: str, d: Diagnosis) -> dict[str, Any] | None:
     return next((e for e in d.report["explanations"] if e["effect"] == effect), None)
 
 
+JOINT_FITS = 2
+"""Candidates the joint search fits in every record (the best by summed screen gain)."""
+
+
+def _failed_check(d: Diagnosis) -> bool:
+    return bool(d.report["checks"]) and any(not c["ok"] for c in d.report["checks"])
+
+
+def _tested_in(d: Diagnosis, key: str, priors: dict[str, Prior] | None, seed: int,
+               force: bool = False, parent: str = "nominal"
+               ) -> tuple[float | None, dict[str, Any] | None, bool]:
+    """An effect tested alone on a record's nominal model (``parent="final"``: on top of
+    what the record's own diagnosis accepted): (log Bayes factor, its physical size where
+    one was fitted, whether it gave any likelihood gain). ``force``: fit it even when its
+    screening gain is below the search's screen_min (the joint search adds weak evidence
+    up)."""
+    cand = make_candidate(key)
+    base = d.selection.final if parent == "final" else d.selection.nominal
+    fm, c = try_candidate(base, cand, priors, force=force)
+    size = (effect_summaries(fm, draws(fm, seed=seed))[-1]["params"]
+            if fm is not None and cand.effect not in NODE_FREE else None)
+    # (an unbalance's size is its balancing answer, which only a diagnosis naming it has)
+    return c["log_bayes_factor"], size, (c.get("screen_gain") or 0.0) > 0.0
+
+
+def _last_screens(d: Diagnosis) -> list[dict[str, Any]]:
+    """The physics screens of the record's round that accepted nothing, which screened
+    what its final model still lacks (none when the search stopped at max_effects)."""
+    last = len(d.selection.accepted) + 1
+    return [c for c in d.report["candidates"] if c["round"] == last
+            and not make_candidate(f"{c['effect']}@{c['location']}").nominal_family]
+
+
+def joint_search(diags: list[Diagnosis], named: set[str], priors: dict[str, Prior] | None,
+                 opt: DiagnoseOptions, speeds: list[float]) -> list[dict[str, Any]]:
+    """Effects the records name together that none names alone (module docstring): one row
+    per candidate fitted, with each record's log Bayes factor, the joint one, the joint log
+    posterior odds and ``named_jointly``."""
+    usable = [i for i, d in enumerate(diags) if not _failed_check(d)]
+    if len(usable) < 2:
+        return []
+    gains: dict[str, list[float]] = {}
+    n_pool = [0]
+    for i in usable:
+        screens = _last_screens(diags[i])
+        n_pool.append(len(screens))
+        for c in screens:
+            gains.setdefault(f"{c['effect']}@{c['location']}", []).append(
+                max(c["screen_gain"] or 0.0, 0.0))
+    K = max(n_pool)
+    named_effects = {k.split("@")[0] for k in named}
+    pointed = sorted((k for k, g in gains.items() if k.split("@")[0] not in named_effects
+                      and posterior_log_odds(sum(g), K) > opt.log_bf_threshold),
+                     key=lambda k: -sum(gains[k]))[:JOINT_FITS]
+    rows = []
+    for key in pointed:
+        row: dict[str, Any] = {"effect": key, "named_in": [], "log_bayes_factor": {},
+                               "present": {}, "screen_gain_sum": float(sum(gains[key]))}
+        sizes: dict[str, dict[str, Any]] = {}
+        for i in usable:
+            lbf, size, _ = _tested_in(diags[i], key, priors, opt.seed, force=True,
+                                      parent="final")
+            row["log_bayes_factor"][str(i + 1)] = lbf
+            row["present"][str(i + 1)] = None if lbf is None else bool(
+                lbf > opt.log_bf_threshold)
+            if size is not None:
+                sizes[str(i + 1)] = size
+        lbfs = [v for v in row["log_bayes_factor"].values() if v is not None]
+        joint = float(sum(lbfs)) if len(lbfs) >= 2 else None
+        row["joint_log_bayes_factor"] = joint
+        row["joint_log_posterior_odds"] = (None if joint is None
+                                           else posterior_log_odds(joint, K))
+        row["named_jointly"] = bool(joint is not None and row["joint_log_posterior_odds"]
+                                    > opt.log_bf_threshold)
+        tested = [v for v in row["present"].values() if v is not None]
+        row["in_every_record"] = bool(tested) and all(tested)
+        row["size"] = size_agreement(key, sizes, speeds)
+        rows.append(row)
+    best = [r for r in rows if r["named_jointly"]]
+    if best:
+        # one joint name per effect: the location the records favour together
+        top = max(best, key=lambda r: r["joint_log_bayes_factor"])
+        for r in best:
+            r["named_jointly"] = r is top or r["effect"].split("@")[0] != \
+                top["effect"].split("@")[0]
+    return rows
+
+
 def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] | None = None,
                      priors: dict[str, Prior] | None = None,
                      options: DiagnoseOptions | None = None) -> RecordsDiagnosis:
     """Diagnose each recording, then test every effect named in one record in each of the
-    others (module docstring)."""
+    others, and search for effects the records name only together (module docstring)."""
     if len(recordings) < 2:
         raise BayesAmbError("diagnose: several recordings are needed to diagnose across "
                             f"records (got {len(recordings)})")
@@ -99,7 +199,6 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
                 named.setdefault(_key(e), []).append(i)
     across = []
     for key, where in named.items():
-        cand = make_candidate(key)
         row: dict[str, Any] = {"effect": key, "named_in": [i + 1 for i in where],
                                "log_bayes_factor": {}, "present": {}}
         sizes: dict[str, dict[str, Any]] = {}
@@ -108,20 +207,16 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
                 e = next(e for e in d.report["explanations"] if _key(e) == key)
                 lbf = e["score"]
                 sizes[str(i + 1)] = _size_of(e, d)
-            elif d.report["checks"] and any(not c["ok"] for c in d.report["checks"]):
+            elif _failed_check(d):
                 lbf = None                              # a failed data check: not tested
             elif (same := _named_elsewhere(key, d)) is not None:
                 lbf = same["score"]                     # the same physics at another place
                 sizes[str(i + 1)] = _size_of(same, d)
             else:
-                fm, c = try_candidate(d.selection.nominal, cand, priors)
-                lbf = c["log_bayes_factor"]
-                if fm is not None and cand.effect not in NODE_FREE:
-                    # (an unbalance's size is its balancing answer, which only a
-                    # diagnosis naming it has)
-                    sizes[str(i + 1)] = effect_summaries(fm, draws(fm, seed=opt.seed))[-1][
-                        "params"]
-                if lbf is None and (c.get("screen_gain") or 0.0) <= 0.0:
+                lbf, size, gain = _tested_in(d, key, priors, opt.seed)
+                if size is not None:
+                    sizes[str(i + 1)] = size
+                if lbf is None and not gain:
                     # no likelihood gain at all: the fit is not refined, the effect absent
                     row["log_bayes_factor"][str(i + 1)] = None
                     row["present"][str(i + 1)] = False
@@ -133,6 +228,8 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         row["in_every_record"] = bool(tested) and all(tested)
         row["size"] = size_agreement(key, sizes, [r.speed_rpm for r in recordings])
         across.append(row)
+    across += joint_search(diags, set(named), priors, opt,
+                           [r.speed_rpm for r in recordings])
     return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings])
 
 

@@ -448,14 +448,16 @@ def _with_companion(parent: FittedModel, cand: Candidate,
 
 
 def try_candidate(parent: FittedModel, cand: Candidate,
-                  priors: dict[str, Prior] | None = None
+                  priors: dict[str, Prior] | None = None, force: bool = False
                   ) -> tuple[FittedModel | None, dict[str, Any]]:
     """One pre-specified candidate on top of a fitted model (a hypothesis from another
     record, records.py): screened, and fitted fully unless its screening gain is below
-    screen_min. Returns the fitted model (None if not fitted) and its score row."""
+    screen_min (``force``: whatever its gain, for evidence that is added up across
+    records). Returns the fitted model (None if not fitted) and its score row."""
     scores: list[dict[str, Any]] = []
-    fm = _try(parent, [cand], 1, SelectOptions(candidates=(cand,), prescreen=False), priors,
-              None, scores)
+    opt = SelectOptions(candidates=(cand,), prescreen=False,
+                        **({"screen_min": -np.inf} if force else {}))
+    fm = _try(parent, [cand], 1, opt, priors, None, scores)
     return fm, scores[0]
 
 
