@@ -77,6 +77,23 @@ def test_a_worse_alternative_changes_nothing(setup, monkeypatch):
     assert [f.candidates[-1] for f in out.accepted] == [first, second]
 
 
+def test_an_unrefined_candidate_screened_near_the_choice_is_an_alternative():
+    """The round refined only its best few; one screened within 90 % of the choice (a
+    delay 3 % below) is compared too, one far below (an actuator gain) is not."""
+    scores = [{"effect": "actuator_2nd", "location": "both", "round": 1,
+               "screen_gain": 12383.5, "log_bayes_factor": 14350.4},
+              {"effect": "actuator_lag", "location": "both", "round": 1,
+               "screen_gain": 12190.1, "log_bayes_factor": 14111.0},
+              {"effect": "time_delay", "location": "controller", "round": 1,
+               "screen_gain": 12058.8, "log_bayes_factor": None},
+              {"effect": "actuator_2nd", "location": "B", "round": 1,
+               "screen_gain": 3588.2, "log_bayes_factor": None},
+              {"effect": "sensor_lag", "location": "A", "round": 2,
+               "screen_gain": 1670.3, "log_bayes_factor": 3702.0}]
+    assert rv._alternatives(scores, 1, "actuator_2nd@both") == ["actuator_lag@both",
+                                                                "time_delay@controller"]
+
+
 def test_one_effect_is_not_revisited(monkeypatch):
     c = make_candidate("sensor_lag@B")
     sel = Selection(nominal=_fm(()), final=_fm((c,), 10.0), accepted=[_fm((c,), 10.0)],

@@ -67,13 +67,14 @@ def _alternatives(scores: list[dict[str, Any]], rnd: int, chosen: str) -> list[s
     factor) or screened within SCREEN_SHARE of the choice."""
     rows = [s for s in scores if s["round"] == rnd]
     top = max((s.get("screen_gain") or 0.0 for s in rows
-               if f"{s['effect']}@{s['location']}" == chosen), default=np.inf)
+               if f"{s['effect']}@{s['location']}" == chosen), default=0.0)
+    near = SCREEN_SHARE * top if top > 0 else np.inf
     out = []
     for s in rows:
         key = f"{s['effect']}@{s['location']}"
         if key != chosen and key not in out and (
                 s.get("log_bayes_factor") is not None
-                or (s.get("screen_gain") or 0.0) >= SCREEN_SHARE * top):
+                or (s.get("screen_gain") or -np.inf) >= near):
             out.append(key)
     return out
 
