@@ -107,3 +107,17 @@ def test_the_records_together_name_what_none_names_alone(monkeypatch, lbf, named
     assert row["named_jointly"] is named and not any(row["present"].values())
     assert records.joint_search(diags, {"cross_coupling@A"}, None, DiagnoseOptions(),
                                 [2e4, 2.5e4, 3e4]) == []
+
+
+def test_the_joint_search_discounts_the_occam_factor_its_records_show(monkeypatch):
+    """A sensor gain screened at 3 nats in each record sums to 9, enough before its Occam
+    factor; the records' own refined sensor gain (screen 6, log BF 1) shows that factor to
+    be 5 nats per record, so nothing is pointed to and nothing fitted."""
+    from bayes_amb.discrepancy import records
+    from bayes_amb.discrepancy.diagnose import DiagnoseOptions
+    monkeypatch.setattr(records, "_tested_in", lambda *a, **k: pytest.fail("fitted"))
+    d = _screened({"sensor_gain@Ax": 3.0, "actuator_gain@By": 0.5})
+    d.report["candidates"].append({"effect": "sensor_gain", "location": "Bx", "round": 1,
+                                   "screen_gain": 6.0, "log_bayes_factor": 1.0})
+    assert records.joint_search([d] * 3, set(), None, DiagnoseOptions(),
+                                [2e4, 2.5e4, 3e4]) == []
