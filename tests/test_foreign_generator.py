@@ -646,3 +646,31 @@ def test_new_kinds_draw_their_family():
     spec = draw_case("control_force", np.random.default_rng(29))
     assert not spec.effects and 2.5 <= spec.habits.force_rms_n <= 12.5
     assert draw_case("control", np.random.default_rng(30)).habits.force_rms_n == 0.0
+
+
+def test_a_weightless_coupling_changes_nothing_and_a_heavy_one_resonates():
+    """The held-out shaft-end coupling: a hung mass of 1 mg changes no FRF; 2 kg on a 150 Hz
+    spring at the last node is a damped pair a little above 150 Hz in x and y (the shaft end
+    moves with it), 20 kg one near 240-255 Hz, which moves the FRF there."""
+    p0 = _plant(())
+
+    def coupled(m):
+        return _plant((Effect("coupling", {"end": "last", "mass_kg": m, "natural_hz": 150.0,
+                                           "zeta": 0.05}),))
+
+    tiny = coupled(1e-6)
+    for f_hz in (15.0, 150.0, 900.0):
+        G0 = _frf(p0.A, p0.B, p0.C, f_hz)
+        assert np.abs(_frf(tiny.A, tiny.B, tiny.C, f_hz) - G0).max() < 1e-6 * np.abs(G0).max()
+
+    def window(A, lo, hi):
+        lam = np.linalg.eigvals(A)
+        f_n, zeta = np.abs(lam) / (2 * np.pi), -lam.real / np.abs(lam)
+        return int(((f_n > lo) & (f_n < hi) & (zeta > 0.03) & (zeta < 0.12)).sum())
+
+    assert window(p0.A, 100, 300) == 0
+    assert window(coupled(2.0).A, 150.5, 180) == 4      # x and y, each a conjugate pair
+    heavy = coupled(20.0)
+    assert window(heavy.A, 220, 270) == 4
+    G0 = _frf(p0.A, p0.B, p0.C, 245.0)
+    assert np.abs(_frf(heavy.A, heavy.B, heavy.C, 245.0) - G0).max() > 0.05 * np.abs(G0).max()

@@ -261,6 +261,9 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float,
         c = k / (u(0.3, 0.8) * speed_rpm * np.pi / 30.0)
         p = {"node": node, "k_direct_nm": k * u(-1.0, 2.0), "k_cross_nm": k,
              "c_direct_nsm": c, "c_cross_nsm": c * u(0.0, 0.2)}
+    elif name == "coupling":
+        p = {"end": str(rng.choice(["first", "last"])), "mass_kg": u(5.0, 40.0),
+             "natural_hz": u(80.0, 400.0), "zeta": u(0.02, 0.1)}
     elif name == "probe_angle":
         p = {"bearing": str(rng.choice(["A", "B"])),
              "angle_deg": float(rng.choice([-1, 1]) * u(2.0, 8.0))}
@@ -295,7 +298,7 @@ def _weaker(e: Effect, f: float = 0.7) -> Effect:
         p["planes"] = [{**q, "u_kgm": q["u_kgm"] * f} for q in p["planes"]]
     elif e.name == "runout":
         p["amplitude_m"] *= f
-    elif e.name == "pedestal":
+    elif e.name in ("pedestal", "coupling"):
         p["mass_kg"] /= f
     elif e.name == "seal":
         for k in ("k_direct_nm", "k_cross_nm", "c_direct_nsm", "c_cross_nsm"):
