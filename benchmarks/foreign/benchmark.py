@@ -73,9 +73,11 @@ IN_LIBRARY = {"actuator_lag", "actuator_2nd", "sensor_lag", "actuator_delay", "s
               "actuator_gain", "sensor_gain", "cross_coupling", "unbalance", "runout", "seal"}
 """Foreign effects the diagnosis library has a candidate for. The seal was held out until
 its coverage was seen (issue 27); the diagnosis now fits a node force's direct terms beside
-its cross-coupling and tries mid-span, so it counts as in the library. Held out: pedestal,
-current_limit, ks_drift, eddy_current (seen once its records motivated the stand-in ranges)
-and probe_angle (added after those, not tuned to)."""
+its cross-coupling and tries mid-span, so it counts as in the library. Held out: pedestal
+(seen once its coverage motivated the band sandwich of model_error.py), current_limit,
+ks_drift, eddy_current (seen once its records motivated the stand-in ranges), probe_angle
+(added after those, not tuned to) and coupling (added after the band sandwich, not tuned
+to)."""
 
 _WHERE = {"all": "both", "A": "A", "B": "B"}
 
