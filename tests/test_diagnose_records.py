@@ -39,6 +39,22 @@ def test_an_effect_named_in_one_record_is_tested_in_all(recs, tmp_path):
     r.save(tmp_path)
     saved = json.loads((tmp_path / "records.json").read_text())
     assert saved["verdicts"][2] == "no mismatch" and (tmp_path / "record_3").is_dir()
+    assert len(saved["speeds_rpm"]) == 3
+    # the report page: each record's fit, the effect across them, what they share
+    page = (tmp_path / "records.html").read_text()
+    for text in ("Each record", "Effects across the records", "cross_coupling@D1",
+                 "What the records share", "k_Ax", "no gain", "data:image/png;base64"):
+        assert text in page, text
+
+
+def test_the_records_report_names_a_folder_without_records(tmp_path):
+    from bayes_amb.report.collect import ReportError
+    from bayes_amb.report.records import write_records_report
+    with pytest.raises(ReportError, match=r"records\.json"):
+        write_records_report(tmp_path)
+    (tmp_path / "records.json").write_text('{"format": "other/1"}')
+    with pytest.raises(ReportError, match="field 'format'"):
+        write_records_report(tmp_path)
 
 
 def test_diagnose_cli_takes_several_records(recs, tmp_path, capsys):

@@ -201,6 +201,6 @@ def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -
                      + ("present in every record" if row["in_every_record"]
                         else "NOT in every record")
                      + (f"; size: {row['size']['reading']}" if row.get("size") else ""))
-    emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json and "
-         f"{args.out}/record_<i>/", args.json)
+    emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json, {args.out}/records.html "
+         f"and {args.out}/record_<i>/", args.json)
     return 0

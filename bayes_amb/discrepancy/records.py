@@ -34,7 +34,7 @@ record, and only when the screens point somewhere.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -60,18 +60,23 @@ class RecordsDiagnosis:
     diagnoses: list[Diagnosis]
     across: list[dict[str, Any]]
     sources: list[str]
+    speeds_rpm: list[float] = field(default_factory=list)
 
     def to_dict(self) -> dict[str, Any]:
         return {"format": "bayes-amb-diagnosis-records/1", "recordings": self.sources,
+                "speeds_rpm": self.speeds_rpm,
                 "verdicts": [d.report["verdict"] for d in self.diagnoses],
                 "across": self.across}
 
     def save(self, out_dir: str | Path) -> Path:
-        """OUT/record_<i>/ (each record's diagnosis files) and OUT/records.json."""
+        """OUT/record_<i>/ (each record's diagnosis files), OUT/records.json and the
+        report page OUT/records.html (report/records.py)."""
+        from bayes_amb.report.records import write_records_report
         d = Path(out_dir)
         for i, dg in enumerate(self.diagnoses, 1):
             dg.save(d / f"record_{i}")
         write_text_atomic(d / "records.json", result_json_text(self.to_dict()))
+        write_records_report(d)
         return d
 
 
@@ -253,7 +258,8 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         across.append(row)
     across += joint_search(diags, set(named), priors, opt,
                            [r.speed_rpm for r in recordings])
-    return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings])
+    return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings],
+                            [float(r.speed_rpm) for r in recordings])
 
 
 SIZE_QUANTITIES = {"unbalance": ("u_kgm", "u_*"), "runout": ("amplitude_m",),

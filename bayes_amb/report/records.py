@@ -1,0 +1,235 @@
+"""The report of a diagnosis across several recordings: OUT/records.html.
+
+    from bayes_amb.report.records import write_records_report
+    write_records_report("runs/speeds")          # after diagnose REC1 REC2 ... --out runs/speeds
+
+It reads what ``diagnose REC1 REC2 ... --out DIR`` wrote (DIR/records.json and each
+DIR/record_<i>/diagnosis.json) and shows, without recomputing anything estimated:
+
+- each record's verdict, fit (NRMSE before and after) and adequacy line;
+- every effect across the records: where it was named, its log Bayes factor in each
+  record, the joint search's sum, and whether its size agrees (discrepancy/records.py);
+- what the records share: each bearing coefficient per record (the diagnosis'
+  ``parameters_after``) with Cochran's Q of their agreement (inference/consistency.py), as
+  a table and a forest plot. A coefficient that disagrees across speeds is either
+  speed-dependent or absorbing something a record's model lacks.
+"""
+
+from __future__ import annotations
+
+import json
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from bayes_amb import __version__
+from bayes_amb.inference.consistency import agreement
+from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.io.nonfinite import restore_non_finite
+from bayes_amb.report import figures as fg
+from bayes_amb.report.collect import ReportError
+from bayes_amb.report.render import render_html
+from bayes_amb.report.sections import Section, Table, g
+
+__all__ = ["collect_records", "records_sections", "write_records_report"]
+
+RECORDS_FORMAT = "bayes-amb-diagnosis-records/1"
+
+
+def _read(path: Path, what: str) -> dict[str, Any]:
+    try:
+        return restore_non_finite(json.loads(path.read_text()))
+    except FileNotFoundError:
+        raise ReportError(f"{path}: no {what} here (run bayes-amb diagnose REC1 REC2 ... "
+                          "--out DIR first)") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ReportError(f"{path}: not valid JSON ({exc})") from None
+
+
+def collect_records(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    """records.json and the records' diagnosis.json files of a run folder."""
+    d = Path(run_dir)
+    result = _read(d / "records.json", "records.json")
+    if result.get("format") != RECORDS_FORMAT:
+        raise ReportError(f"{d / 'records.json'}: field 'format' is "
+                          f"{result.get('format')!r}, expected {RECORDS_FORMAT!r}")
+    reports = [_read(d / f"record_{i}" / "diagnosis.json", "diagnosis.json")
+               for i in range(1, len(result["recordings"]) + 1)]
+    return result, reports
+
+
+def _records_table(result: dict[str, Any], reports: list[dict[str, Any]]) -> Table:
+    speeds = result.get("speeds_rpm") or [None] * len(reports)
+    rows = []
+    for i, (r, rpm) in enumerate(zip(reports, speeds, strict=True), 1):
+        fit = r.get("fit", {})
+        before = max(fit.get("before", {}).get("nrmse", {}).values(), default=np.nan)
+        after = max(fit.get("after", {}).get("nrmse", {}).values(), default=np.nan)
+        named = ", ".join(f"{e['effect']}@{e['location']}" for e in r["explanations"]) or "–"
+        rows.append([str(i), Path(str(r.get("recording", "?"))).name,
+                     "–" if rpm is None else g(rpm, 5), r["verdict"], named,
+                     f"{g(before, 3)} → {g(after, 3)}",
+                     "adequate" if _adequacy(r).get("adequate") else "NOT adequate"])
+    return Table("Each record's diagnosis", ["#", "file", "rpm", "verdict",
+                                             "named", "NRMSE before → after",
+                                             "final model"], rows,
+                 "NRMSE: the residual's RMS over eps's, the worst of the four channels."
+                 + (" Why a final model is not adequate: listed above the table."
+                    if any(not _adequacy(r).get("adequate", True) for r in reports)
+                    else ""), wrap=(1, 4))
+
+
+def _adequacy(r: dict[str, Any]) -> dict[str, Any]:
+    return r.get("adequacy_after") or r.get("adequacy") or {}
+
+
+def _bf(row: dict[str, Any], k: str) -> str:
+    v = row["log_bayes_factor"][k]
+    if v is not None:
+        return g(v, 3)
+    return "no gain" if row["present"].get(k) is False else "not tested"
+
+
+def _across_table(result: dict[str, Any]) -> Table | None:
+    if not result["across"]:
+        return None
+    rows = []
+    for row in result["across"]:
+        bfs = "; ".join(f"{k}: {_bf(row, k)}" for k in row["log_bayes_factor"])
+        if row["named_in"]:
+            where = "record " + ", ".join(map(str, row["named_in"]))
+        elif row.get("named_jointly"):
+            where = "the records together"
+        else:
+            where = "nowhere (joint search)"
+        joint = row.get("joint_log_posterior_odds")
+        size = row.get("size")
+        rows.append([row["effect"], where, bfs, "–" if joint is None else g(joint, 3),
+                     "yes" if row["in_every_record"] else "no",
+                     size["reading"] if size else "–"])
+    return Table("Effects across the records", ["effect", "named by", "log BF per record",
+                                                "joint log posterior odds",
+                                                "in every record", "size across records"],
+                 rows, "An effect named in one record is tested alone in every other; the "
+                       "joint search fits what the records' screens point to together and "
+                       "adds its log Bayes factors (prior odds 1/K, threshold 3).",
+                 wrap=(2, 5))
+
+
+def _coefficients(reports: list[dict[str, Any]]
+                  ) -> tuple[list[str], dict[str, list[dict[str, Any] | None]]]:
+    names = [n for n in reports[0].get("parameters_after", {})
+             if all(n in r.get("parameters_after", {}) for r in reports)]
+    return names, {n: [r["parameters_after"].get(n) for r in reports] for n in names}
+
+
+def _shared_table(reports: list[dict[str, Any]]) -> tuple[Table | None, dict[str, Any]]:
+    names, per = _coefficients(reports)
+    if not names:
+        return None, {}
+    means = {n: [v["mean"] for v in per[n]] for n in names}
+    sds = {n: [v["sd"] for v in per[n]] for n in names}
+    test = agreement(means, sds)
+    rows = []
+    for n in names:
+        t = test["parameters"].get(n)
+        cells = [f"{g(v['mean'], 3)} [{g(v['hdi90'][0], 3)}, {g(v['hdi90'][1], 3)}]"
+                 for v in per[n]]
+        verdict = ("–" if t is None else
+                   "DISAGREE" if n in test["disagree"] else "agree")
+        rows.append([n, *cells, "–" if t is None else g(t["p_adjusted"], 2), verdict])
+    header = ["coefficient", *(f"record {i}" for i in range(1, len(reports) + 1)),
+              "Holm p", "across records"]
+    return Table("Bearing coefficients per record (theta, 90 % HDI) and their agreement",
+                 header, rows, "Holm p: Cochran's Q of the records' means against their "
+                 "sds, Holm-adjusted over the coefficients. A coefficient that disagrees "
+                 "is speed-dependent or absorbs what a record's model lacks.",
+                 wrap=tuple(range(1, len(reports) + 1))), test
+
+
+def _forest(reports: list[dict[str, Any]], speeds: list[float | None]
+            ) -> fg.ReportFigure | None:
+    import matplotlib.pyplot as plt
+    names, per = _coefficients(reports)
+    if not names:
+        return None
+    n_rec = len(reports)
+    fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(names) * max(n_rec, 2) / 2 + 1.2))
+    colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for j, n in enumerate(names):
+        for i, v in enumerate(per[n]):
+            y = j + (i - (n_rec - 1) / 2) * 0.8 / max(n_rec, 2)
+            ax.plot(v["hdi90"], [y, y], color=colours[i % len(colours)], lw=2.2,
+                    label=(f"record {i + 1}" + ("" if speeds[i] is None
+                                                 else f" ({speeds[i]:.0f} rpm)"))
+                    if j == 0 else None)
+            ax.plot([v["mean"]], [y], "o", color=colours[i % len(colours)], ms=4)
+    ax.set_yticks(range(len(names)), names)
+    ax.invert_yaxis()
+    ax.axvline(0.0, color="0.6", lw=0.8)
+    ax.set_xlabel("theta (fraction of the nominal value)")
+    ax.legend(loc="best", fontsize=8)
+    ax.grid(axis="x", alpha=0.3)
+    fig.tight_layout()
+    out = fg.render_figure(fig, "records_coefficients", "Bearing coefficients per record",
+                           "Mean and 90 % HDI of each coefficient in each record's "
+                           "diagnosis (parameters_after). Records that agree overlap; "
+                           "the table above tests it.")
+    plt.close(fig)
+    return out
+
+
+def records_sections(result: dict[str, Any], reports: list[dict[str, Any]]
+                     ) -> list[Section]:
+    """The report's sections: the records, the effects across them, what they share."""
+    shared, test = _shared_table(reports)
+    n = len(reports)
+    verdicts = ", ".join(f"{v} ({sum(r['verdict'] == v for r in reports)})"
+                         for v in dict.fromkeys(r["verdict"] for r in reports))
+    jointly = [row["effect"] for row in result["across"] if row.get("named_jointly")]
+    lines = [f"{n} records diagnosed, each with its own model, noise and speed: {verdicts}."]
+    every = [row["effect"] for row in result["across"] if row["in_every_record"]]
+    some = [row["effect"] for row in result["across"]
+            if row["named_in"] and not row["in_every_record"]]
+    if every:
+        lines.append("Present in every record (a property of the machine): "
+                     + ", ".join(every) + ".")
+    if some:
+        lines.append("Named in some records only (depends on what differs between them): "
+                     + ", ".join(some) + ".")
+    if jointly:
+        lines.append("Named only by the records together (no record alone had the "
+                     "evidence): " + ", ".join(jointly) + ".")
+    if test:
+        lines.append(test["line"][:1].upper() + test["line"][1:] + ".")
+    doubted = [f"Record {i}: {_adequacy(r)['line']}" for i, r in enumerate(reports, 1)
+               if not _adequacy(r).get("adequate", True)]
+    summary = Section("summary", "Summary", paragraphs=lines, bullets=doubted,
+                      tables=[_records_table(result, reports)])
+    across = _across_table(result)
+    sections = [summary]
+    if across is not None:
+        sections.append(Section("across", "Effects across the records", tables=[across]))
+    if shared is not None:
+        fig = _forest(reports, result.get("speeds_rpm") or [None] * n)
+        sections.append(Section("shared", "What the records share",
+                                tables=[shared], figures=[fig] if fig else []))
+    return sections
+
+
+def write_records_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Path:
+    """Write OUT/records.html (OUT defaults to the run folder) for a run folder of
+    ``diagnose REC1 REC2 ... --out DIR``; returns its path."""
+    result, reports = collect_records(run_dir)
+    sections = records_sections(result, reports)
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    meta = {"title": f"Diagnosis across {len(reports)} records",
+            "subtitle": f"Run folder {Path(run_dir).name}; made {now} by bayes-amb "
+                        f"{__version__}", "notes": []}
+    out = Path(out_dir or run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / "records.html"
+    write_text_atomic(path, render_html(sections, meta))
+    return path
