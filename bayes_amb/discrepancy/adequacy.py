@@ -26,7 +26,7 @@ from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
 from bayes_amb.discrepancy.information import information_check
 from bayes_amb.discrepancy.linearity import linearity_check
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
-from bayes_amb.discrepancy.model_error import model_error, prior_sds
+from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
@@ -153,8 +153,7 @@ def assess_fit(recording: Recording, names: tuple[str, ...],
     verdict = judge(checks, loc, worst_nrmse(nominal, eps))
     if not verdict.adequate:
         nominal.model_error = model_error(nominal.like, nominal.x, nominal.p, nominal.cov,
-                                          nominal.names, robust=True,
-                                          prior_sd=prior_sds(nominal))
+                                          nominal.names, robust=True)
     return verdict, nominal
 
 

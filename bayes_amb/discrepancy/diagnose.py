@@ -53,7 +53,7 @@ from bayes_amb.discrepancy.locate import (
     merge_spans,
     synchronous_speed,
 )
-from bayes_amb.discrepancy.model_error import model_error, prior_sds
+from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.discrepancy.revisit import revisit
 from bayes_amb.discrepancy.select import Selection, SelectOptions, select
 from bayes_amb.discrepancy.stand_ins import stand_ins
@@ -322,7 +322,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     doubted[id(reported)] = not adequacy_after.adequate
     for fm in {id(m): m for m in (nominal, reported)}.values():
         fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names,
-                                     robust=doubted[id(fm)], prior_sd=prior_sds(fm))
+                                     robust=doubted[id(fm)])
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
     all_effects = effect_summaries(reported, s_fin)
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]

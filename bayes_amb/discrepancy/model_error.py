@@ -160,30 +160,11 @@ def band_sandwich(C: NDArray, band_scores: list[tuple[NDArray, NDArray]]) -> NDA
     return K @ meat @ K.T
 
 
-def prior_sds(fitted: Any) -> NDArray:
-    """The prior sd of each parameter of a fitted model (its LogPosterior's priors)."""
-    return np.array([pr.sd for pr in fitted.post.priors.priors], float)
-
-
-def _loewner_min(A: NDArray, D: NDArray) -> NDArray:
-    """The largest covariance at most A and at most the diagonal D (its square root
-    scaling): D^1/2 min(I, D^-1/2 A D^-1/2) D^1/2."""
-    s = np.sqrt(np.diag(D))
-    lam, V = np.linalg.eigh(0.5 * (A + A.T) / np.outer(s, s))
-    out = (V * np.minimum(lam, 1.0)) @ V.T * np.outer(s, s)
-    return 0.5 * (out + out.T)
-
-
 def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
-                names: tuple[str, ...], robust: bool = False,
-                prior_sd: NDArray | None = None) -> ModelError | None:
+                names: tuple[str, ...], robust: bool = False) -> ModelError | None:
     """Widen the Laplace covariance ``cov`` of the fitted model at ``x`` (parameters first,
     p of them, then log10 sigma) by the band-wise model error (module docstring); with
     ``robust`` (the location tests doubt the model) the band sandwich is its floor.
-    ``prior_sd`` (per parameter, finite where the prior has a variance): the widening is
-    capped at the prior's covariance, in every direction (a model error that removes all
-    the data's information leaves the prior, not more; a sensor gain had come out at 444
-    +- 0.3 from draws of sd 1000 x its Laplace sd); never narrower than the Laplace one.
 
     ``like`` is a WhittleLikelihood (identification) or RobustWhittle (diagnosis); only the
     free parameters (positive variance in ``cov``) are touched. None without a covariance.
@@ -267,16 +248,6 @@ def model_error(like: Any, x: NDArray, p: int, cov: NDArray | None,
         else:
             sandwich_ratio = {names[j]: float(np.sqrt(Cs[i, i] / C[i, i]))
                               for i, j in enumerate(free)}
-    if prior_sd is not None:
-        capped = free[np.isfinite(np.asarray(prior_sd, float)[free])]
-        if capped.size:
-            block = np.ix_(capped, capped)
-            lowered = _loewner_min(new[block],
-                                   np.diag(np.asarray(prior_sd, float)[capped] ** 2))
-            try:        # never narrower than the Laplace covariance itself
-                new[block] = _loewner_max(cov[block], lowered)
-            except np.linalg.LinAlgError:
-                pass
     sd_ratio = {names[j]: float(np.sqrt(new[j, j] / cov[j, j])) for j in free}
     return ModelError(tau=tau, group_hz=group_hz, cov=new, sd_ratio=sd_ratio, shift=shift,
                       sandwich_ratio=sandwich_ratio)
