@@ -120,3 +120,28 @@ def test_a_swap_is_told_in_the_paragraph_and_drawn_without_the_revisit_rows():
     fig = plot_candidates({"candidates": rows, "explanations": [
         {"effect": "time_delay", "location": "controller"}]})
     assert len(fig.axes) >= 1
+
+
+def test_an_unrefined_alternative_must_win_by_the_threshold(setup, monkeypatch):
+    """time_delay was fitted in round 1 (no margin); an actuator_lag that only screened
+    near the choice must beat it by 3 nats: +0.7 changes nothing (+3.5 replaces it: below)."""
+    sel, _, _ = setup
+    sel.scores[0]["screen_gain"] = 10000.0
+    sel.scores.append({"effect": "actuator_lag", "location": "both", "round": 1,
+                       "screen_gain": 9800.0, "log_bayes_factor": None})
+    final = sel.final
+    _refine_with({"actuator_2nd@both": 3525.1, "time_delay@controller": 3500.0,
+                  "actuator_lag@both": 3525.8}, monkeypatch)
+    out = rv.revisit(sel)
+    assert out.final is final
+
+
+def test_an_unrefined_alternative_that_wins_clearly_replaces(setup, monkeypatch):
+    sel, _, _ = setup
+    sel.scores[0]["screen_gain"] = 10000.0
+    sel.scores.append({"effect": "actuator_lag", "location": "both", "round": 1,
+                       "screen_gain": 9800.0, "log_bayes_factor": None})
+    _refine_with({"actuator_2nd@both": 3525.1, "time_delay@controller": 3500.0,
+                  "actuator_lag@both": 3528.6}, monkeypatch)
+    out = rv.revisit(sel)
+    assert [c.key for c in out.final.candidates] == ["sensor_lag@B", "actuator_lag@both"]
