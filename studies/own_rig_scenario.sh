@@ -9,7 +9,7 @@
 # 0.3) nominal, 0.2977 after the diagnosis names the three bending pairs and the residual
 # flexibility the 8-state model leaves out.
 set -euo pipefail
-BIN=${1:?bin dir}; W=${2:?work dir}; mkdir -p "$W"; cd "$W"
+BIN=$(cd "${1:?bin dir}" && pwd); W=${2:?work dir}; mkdir -p "$W"; cd "$W"
 PY=$BIN/python; BA=$BIN/bayes-amb
 t() { local s=$SECONDS; "$@"; echo "[$(( SECONDS - s )) s] $*" >&2; }
 
