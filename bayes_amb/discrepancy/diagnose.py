@@ -318,8 +318,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     adequacy_after = judge(checks, final_loc, max(after["nrmse"].values()),
                            advice=FINAL_ADVICE)
     say("integrating the model error out of the posteriors")
-    doubted = {id(nominal): not adequacy.adequate}
-    doubted[id(reported)] = not adequacy_after.adequate
+    doubted = {id(nominal): not adequacy.adequate,      # (one model: the final verdict)
+               id(reported): not adequacy_after.adequate}
     for fm in {id(m): m for m in (nominal, reported)}.values():
         fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names,
                                      robust=doubted[id(fm)])

@@ -43,6 +43,7 @@ import numpy as np
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
 from bayes_amb.discrepancy.fitstats import draws, effect_summaries
 from bayes_amb.discrepancy.library import make_candidate
+from bayes_amb.discrepancy.library.registry import NOMINAL_FAMILY
 from bayes_amb.discrepancy.select import NODE_FREE, posterior_log_odds, try_candidate
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.consistency import agreement
@@ -132,7 +133,13 @@ def _last_screens(d: Diagnosis) -> list[dict[str, Any]]:
     what its final model still lacks (none when the search stopped at max_effects)."""
     last = len(d.selection.accepted) + 1
     return [c for c in d.report["candidates"] if c["round"] == last
-            and not make_candidate(f"{c['effect']}@{c['location']}").nominal_family]
+            and c["effect"] not in NOMINAL_FAMILY]
+
+
+def _in_every_record(row: dict[str, Any]) -> bool:
+    """Present in every record where it was tested (``row["present"]``, None: untested)."""
+    tested = [v for v in row["present"].values() if v is not None]
+    return bool(tested) and all(tested)
 
 
 def _occam_factors(diags: list[Diagnosis]) -> dict[str, float]:
@@ -196,8 +203,7 @@ def joint_search(diags: list[Diagnosis], named: set[str], priors: dict[str, Prio
                                            else posterior_log_odds(joint, K))
         row["named_jointly"] = bool(joint is not None and row["joint_log_posterior_odds"]
                                     > opt.log_bf_threshold)
-        tested = [v for v in row["present"].values() if v is not None]
-        row["in_every_record"] = bool(tested) and all(tested)
+        row["in_every_record"] = _in_every_record(row)
         row["size"] = size_agreement(key, sizes, speeds)
         rows.append(row)
     best = [r for r in rows if r["named_jointly"]]
@@ -219,6 +225,7 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         raise BayesAmbError("diagnose: several recordings are needed to diagnose across "
                             f"records (got {len(recordings)})")
     opt = options or DiagnoseOptions()
+    speeds = [float(r.speed_rpm) for r in recordings]
     diags = [diagnose(r, params, priors, opt) for r in recordings]
     named: dict[str, list[int]] = {}
     for i, d in enumerate(diags):
@@ -252,14 +259,11 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
             row["log_bayes_factor"][str(i + 1)] = lbf
             row["present"][str(i + 1)] = (None if lbf is None
                                           else bool(lbf > opt.log_bf_threshold))
-        tested = [v for v in row["present"].values() if v is not None]
-        row["in_every_record"] = bool(tested) and all(tested)
-        row["size"] = size_agreement(key, sizes, [r.speed_rpm for r in recordings])
+        row["in_every_record"] = _in_every_record(row)
+        row["size"] = size_agreement(key, sizes, speeds)
         across.append(row)
-    across += joint_search(diags, set(named), priors, opt,
-                           [r.speed_rpm for r in recordings])
-    return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings],
-                            [float(r.speed_rpm) for r in recordings])
+    across += joint_search(diags, set(named), priors, opt, speeds)
+    return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings], speeds)
 
 
 SIZE_QUANTITIES = {"unbalance": ("u_kgm", "u_*"), "runout": ("amplitude_m",),

@@ -17,7 +17,6 @@ DIR/record_<i>/diagnosis.json) and shows, without recomputing anything estimated
 
 from __future__ import annotations
 
-import json
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
@@ -27,9 +26,8 @@ import numpy as np
 from bayes_amb import __version__
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.io.atomic import write_text_atomic
-from bayes_amb.io.nonfinite import restore_non_finite
 from bayes_amb.report import figures as fg
-from bayes_amb.report.collect import ReportError
+from bayes_amb.report.collect import ReportError, _read_json
 from bayes_amb.report.render import render_html
 from bayes_amb.report.sections import Section, Table, g
 
@@ -38,24 +36,15 @@ __all__ = ["collect_records", "records_sections", "write_records_report"]
 RECORDS_FORMAT = "bayes-amb-diagnosis-records/1"
 
 
-def _read(path: Path, what: str) -> dict[str, Any]:
-    try:
-        return restore_non_finite(json.loads(path.read_text()))
-    except FileNotFoundError:
-        raise ReportError(f"{path}: no {what} here (run bayes-amb diagnose REC1 REC2 ... "
-                          "--out DIR first)") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ReportError(f"{path}: not valid JSON ({exc})") from None
-
-
 def collect_records(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """records.json and the records' diagnosis.json files of a run folder."""
     d = Path(run_dir)
-    result = _read(d / "records.json", "records.json")
+    result = _read_json(d / "records.json",
+                        "records (bayes-amb diagnose REC1 REC2 ... --out DIR writes them)")
     if result.get("format") != RECORDS_FORMAT:
         raise ReportError(f"{d / 'records.json'}: field 'format' is "
                           f"{result.get('format')!r}, expected {RECORDS_FORMAT!r}")
-    reports = [_read(d / f"record_{i}" / "diagnosis.json", "diagnosis.json")
+    reports = [_read_json(d / f"record_{i}" / "diagnosis.json", "record diagnosis")
                for i in range(1, len(result["recordings"]) + 1)]
     return result, reports
 
