@@ -1,0 +1,134 @@
+"""The golden cases of issue 31: ten foreign recordings diagnosed and five identified with
+default options, their ``diagnosis.json`` and ``summary.json`` as the product writes them.
+
+The files in this folder were written by main before the typed results (issue 31) landed
+(commit c936d8d), with the tests' thread settings; ``tests/test_golden.py`` re-runs the
+cases and compares, so the move to
+typed result objects is shown to change no number. Regenerate only for a change meant to
+alter results, and say so in the commit:
+
+    PYTHONPATH=. .venv/bin/python -m tests.golden.cases
+"""
+
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import sys
+from pathlib import Path
+from typing import Any
+
+HERE = Path(__file__).parent
+SEED = 11
+DURATION_S = 1.0
+
+# (kind, index): a record of every verdict, in-library effects at both ends of the loop,
+# a stand-in-prone family, a held-out one and the full-order truth
+DIAGNOSED = (("current_limit", 2), ("control", 6), ("control_force", 7), ("seal", 7),
+             ("eddy_current", 6), ("actuator_gain", 0), ("sensor_gain", 1),
+             ("sensor_delay", 0), ("runout", 2), ("full_truth", 4))
+# (kind, index, sampled): MAP with Laplace, and one short emcee run
+IDENTIFIED = (("control", 6, False), ("seal", 7, False), ("actuator_gain", 0, False),
+              ("probe_angle", 1, False), ("control_force", 7, True))
+SAMPLED_STEPS = 300
+
+IGNORED = frozenset({"wall_s", "map_wall_s", "package_version", "recording", "source",
+                     "seconds", "sampling_wall_s"})
+
+
+def record(work: Path, kind: str, index: int) -> Path:
+    """The foreign recording ``kind_index`` (seeded as the foreign benchmark seeds it)."""
+    import numpy as np
+
+    from benchmarks.foreign import draw_case, write_case
+    from benchmarks.foreign.benchmark import _controller_file, kind_number
+
+    rng = np.random.default_rng([SEED, index, kind_number(kind)])
+    ctrl = _controller_file(work, 1e-4)
+    spec = draw_case(kind, rng, controller_file=str(ctrl), duration_s=DURATION_S)
+    return Path(write_case(spec, work / "recordings", f"{kind}_{index:02d}", rng)["csv"])
+
+
+def diagnosis_json(work: Path, kind: str, index: int) -> dict[str, Any]:
+    """diagnosis.json of the default diagnosis, as ``Diagnosis.save`` writes it."""
+    from bayes_amb import diagnose, load_recording
+
+    d = diagnose(load_recording(record(work, kind, index)))
+    run = d.save(work / "runs" / f"{kind}_{index:02d}")
+    return json.loads((run / "diagnosis.json").read_text())
+
+
+def summary_json(work: Path, kind: str, index: int, sampled: bool) -> dict[str, Any]:
+    """summary.json of identify on the eight bearing coefficients, as its ``save`` writes
+    it: MAP with Laplace, or a short emcee run (fixed steps, seed 0)."""
+    from bayes_amb import IdentifyOptions, identify, load_recording
+    from bayes_amb.discrepancy.library import BEARING_COEFFICIENTS
+
+    opts = (IdentifyOptions(steps=SAMPLED_STEPS) if sampled
+            else IdentifyOptions(map_only=True))
+    res = identify(load_recording(record(work, kind, index)), list(BEARING_COEFFICIENTS),
+                   options=opts)
+    run = res.save(work / "ident" / f"{kind}_{index:02d}")
+    return json.loads((run / "summary.json").read_text())
+
+
+def golden_path(kind: str, index: int, what: str) -> Path:
+    return HERE / f"{kind}_{index:02d}.{what}.json.gz"
+
+
+def read_golden(path: Path) -> dict[str, Any]:
+    return json.loads(gzip.decompress(path.read_bytes()).decode())
+
+
+def differences(a: Any, b: Any, where: str = "", rtol: float = 1e-4, atol: float = 1e-9
+                ) -> list[str]:
+    """Where two JSON values differ: keys (not their order), types, strings, lengths, and
+    numbers beyond rtol/atol (NaN equals NaN).
+    Keys in IGNORED (timings, versions, paths) are not compared."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out = []
+        if a.keys() != b.keys():
+            out.append(f"{where}: keys {sorted(a.keys() ^ b.keys())} in one only")
+        for k in a.keys() & b.keys():
+            if k not in IGNORED:
+                out += differences(a[k], b[k], f"{where}.{k}", rtol, atol)
+        return out
+    if isinstance(a, list) and isinstance(b, list):
+        if len(a) != len(b):
+            return [f"{where}: length {len(a)} != {len(b)}"]
+        return [d for i, (x, y) in enumerate(zip(a, b, strict=True))
+                for d in differences(x, y, f"{where}[{i}]", rtol, atol)]
+    num = (int, float)
+    if isinstance(a, num) and isinstance(b, num) and not isinstance(a, bool) \
+            and not isinstance(b, bool):
+        if (math.isnan(a) and math.isnan(b)) or a == b:
+            return []
+        return [] if abs(a - b) <= atol + rtol * abs(b) else [f"{where}: {a!r} != {b!r}"]
+    return [] if a == b else [f"{where}: {a!r} != {b!r}"]
+
+
+def main() -> int:
+    import tempfile
+
+    from bayes_amb.threads import configure_process
+
+    configure_process()       # one BLAS thread, as the tests run (before numpy is imported)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        work = Path(tmp)
+        for kind, index in DIAGNOSED:
+            out = diagnosis_json(work, kind, index)
+            golden_path(kind, index, "diagnosis").write_bytes(
+                gzip.compress(json.dumps(out, indent=1).encode(), mtime=0))
+            sys.stderr.write(f"{kind}_{index:02d}: {out['verdict']}\n")
+        for kind, index, sampled in IDENTIFIED:
+            out = summary_json(work, kind, index, sampled)
+            golden_path(kind, index, "summary").write_bytes(
+                gzip.compress(json.dumps(out, indent=1).encode(), mtime=0))
+            sys.stderr.write(f"{kind}_{index:02d}: identified\n")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
