@@ -23,6 +23,9 @@ _API = {
     "DiagnoseOptions": "bayes_amb.discrepancy.diagnose",
     "diagnose_records": "bayes_amb.discrepancy.records",
     "plan": "bayes_amb.planning",
+    "Diagnosis": "bayes_amb.results",
+    "Identification": "bayes_amb.results",
+    "EngineeringAnswers": "bayes_amb.results",
     "Design": "bayes_amb.planning",
     "Noise": "bayes_amb.planning",
 }

@@ -32,6 +32,7 @@ from bayes_amb.io.recording import load_recording, save_recording
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.reduction.fidelity import singular_value_data
 from bayes_amb.report import ReportOptions, collect_run, write_report
+from bayes_amb.results.identification import Identification
 from bayes_amb.rig import load_rig
 from bayes_amb.rotor import full_model, unstable_poles
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
@@ -78,11 +79,11 @@ class DemoResult:
     timings: dict[str, float]
 
 
-def _estimates(summary: dict[str, Any], truth: dict[str, float]) -> dict[str, Any]:
-    return {n: {"map": summary["map"][n], "mean": p["mean"], "hdi90": p["hdi90"],
-                "true": truth.get(n, 0.0), "physical_mean": p["physical_mean"],
-                "unit": p["unit"]}
-            for n, p in summary["parameters"].items()} | {"converged": summary["converged"]}
+def _estimates(res: Identification, truth: dict[str, float]) -> dict[str, Any]:
+    return {n: {"map": res.map[n], "mean": p.mean, "hdi90": p.hdi90,
+                "true": truth.get(n, 0.0), "physical_mean": p.physical_mean,
+                "unit": p.unit}
+            for n, p in res.parameters.items()} | {"converged": res.converged}
 
 
 def _diagnose(run_dir: Path, csv: Path, params: str, seed: int) -> tuple[str, list[str]]:
@@ -90,9 +91,9 @@ def _diagnose(run_dir: Path, csv: Path, params: str, seed: int) -> tuple[str, li
     so that the report shows it; returns the one-line summary and the named effects."""
     d = diagnose(load_recording(csv), params, options=DiagnoseOptions(seed=seed))
     d.save(run_dir)
-    named = [f"{e['description']} (log BF {e['score']:.0f})" for e in d.report["explanations"]]
-    after = ", ".join(f"{n} {v['mean']:+.4f} [{v['hdi90'][0]:+.4f}, {v['hdi90'][1]:+.4f}]"
-                      for n, v in d.report["parameters_after"].items())
+    named = [f"{e.description} (log BF {e.score:.0f})" for e in d.explanations]
+    after = ", ".join(f"{n} {v.mean:+.4f} [{v.hdi90[0]:+.4f}, {v.hdi90[1]:+.4f}]"
+                      for n, v in d.parameters_after.items())
     text = "; ".join(named) if named else "no effect named"
     return (text + (f"; with it in the model: {after}" if named else "")), d.effects
 
@@ -135,7 +136,7 @@ def run_demo(out_dir: str | Path = "reports/demo", config: DemoConfig | None = N
     csv_p = save_recording(out / "paper_case.csv", rec, truth=truth)[0]
     res_p = identify(load_recording(csv_p), "k_By", options=cfg.identify_options())
     run_p = res_p.save(out / "paper_run")
-    paper = _estimates(res_p.summary, truth_p)
+    paper = _estimates(res_p, truth_p)
     k = paper["k_By"]
     say(f"    k_By: MAP {k['map']:.5f}, posterior mean {k['mean']:.5f} (true "
         f"{cfg.paper_theta}, paper {PAPER_THETA})")
@@ -154,7 +155,7 @@ def run_demo(out_dir: str | Path = "reports/demo", config: DemoConfig | None = N
     res_r = identify(load_recording(csv_r), cfg.realistic_params,
                      options=cfg.identify_options())
     run_r = res_r.save(out / "realistic_run")
-    realistic = _estimates(res_r.summary, cfg.realistic_theta)
+    realistic = _estimates(res_r, cfg.realistic_theta)
     for n in res_r.names:
         e = realistic[n]
         say(f"    {n}: mean {e['mean']:.4f}, 90 % HDI [{e['hdi90'][0]:.4f}, "

@@ -32,6 +32,10 @@ class RecordingError(BayesAmbError):
     """A recording (CSV plus JSON sidecar) is missing, malformed or inconsistent."""
 
 
+class ResultError(BayesAmbError):
+    """A result file (diagnosis.json, summary.json, ...) is missing or malformed."""
+
+
 class LFTError(BayesAmbError):
     """An LFT is ill-posed or its blocks have inconsistent dimensions."""
 

@@ -46,7 +46,7 @@ def main() -> None:
         d = diagnose(rec, options=DiagnoseOptions(candidates=lib))
         cpu = time.process_time() - c0
         print(f"{label:32s} {len(lib):3d} candidates  CPU {cpu:6.1f} s  "
-              f"named {', '.join(d.effects) or 'nothing'}  ({d.report['verdict']})",
+              f"named {', '.join(d.effects) or 'nothing'}  ({d.verdict})",
               flush=True)
 
 

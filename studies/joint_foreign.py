@@ -184,15 +184,15 @@ def run(out: Path, groups: dict[str, int], seed: int, levels: bool = False) -> N
                 continue
             paths = (write_levels if levels else write_group)(out, kind, g, seed, ctrl)
             res = identify_joint([load_recording(p) for p in paths], list(COEFFICIENTS))
-            write_text_atomic(out / "joint" / f"{name}.json",
-                              result_json_text(plain(res.summary, float)))
+            summary = plain(res.to_dict(), float)
+            write_text_atomic(out / "joint" / f"{name}.json", result_json_text(summary))
             truth = json.loads(paths[0].with_suffix(".truth.json").read_text())
-            row = {"group": name, "kind": kind, "seconds": res.summary["wall_s"],
-                   "adequate": res.summary["adequacy"].get("adequate"),
-                   "records_adequate": [bool((r.get("adequacy") or {}).get("adequate", True))
-                                        for r in res.summary["records"]],
-                   "disagree": res.summary.get("agreement", {}).get("disagree", []),
-                   **score(res.summary, truth["theta"])}
+            row = {"group": name, "kind": kind, "seconds": res.wall_s,
+                   "adequate": res.adequacy.adequate,
+                   "records_adequate": [r.adequacy is None or r.adequacy.adequate
+                                        for r in res.records],
+                   "disagree": (res.agreement or {}).get("disagree", []),
+                   **score(summary, truth["theta"])}
             append_row(rows_path, row)
             inside = sum(v["inside"] for v in row["joint"].values())
             print(f"{name}: joint {inside}/8 inside, width ratio "

@@ -64,10 +64,10 @@ def run(out: Path, n: int, designs: list[str]) -> dict:
             rec, _ = design_recording(rig, ctrl, design, noise, seed=seed)
             res = identify(rec, BEARING_COEFFICIENTS,
                            options=IdentifyOptions(map_only=True, adequacy=False))
-            par = res.summary["parameters"]
+            par = res.parameters
             row = {"design": name, "seed": seed,
-                   "mean": {k: par[k]["mean"] for k in BEARING_COEFFICIENTS},
-                   "sd": {k: par[k]["sd"] for k in BEARING_COEFFICIENTS}}
+                   "mean": {k: par[k].mean for k in BEARING_COEFFICIENTS},
+                   "sd": {k: par[k].sd for k in BEARING_COEFFICIENTS}}
             rows.append(row)
             with rows_path.open("a") as f:
                 f.write(json.dumps(row) + "\n")
@@ -125,9 +125,9 @@ def check_optimised(out: Path, targets: dict[str, float], n: int) -> dict:
             rec, _ = design_recording(rig, ctrl, design, noise, seed=2000 + i)
             res = identify(rec, tuple(targets),
                            options=IdentifyOptions(map_only=True, adequacy=False))
-            par = res.summary["parameters"]
-            means.append([par[k]["mean"] for k in targets])
-            sds.append([par[k]["sd"] for k in targets])
+            par = res.parameters
+            means.append([par[k].mean for k in targets])
+            sds.append([par[k].sd for k in targets])
         means, sds = np.array(means), np.array(sds)
         result["designs"][label] = {
             "design": {"excitation": design.excitation, "band_hz": design.band_hz,

@@ -33,7 +33,7 @@ def main() -> None:
         r = detectability(rig, ctrl, design, noise, e)
         rec, _ = simulate_recording(rig, ctrl, SimulationConfig(
             truth="reduced", effects=(e,), noise_rms=5e-8, duration=2.0, seed=5))
-        rep = diagnose(rec).report
+        rep = diagnose(rec).to_dict()
         named = [(x["effect"], x["location"], round(x["score"], 1))
                  for x in rep["explanations"]]
         best = max((c.get("log_bayes_factor") or float("-inf")) for c in rep["candidates"]

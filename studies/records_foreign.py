@@ -92,7 +92,7 @@ def run(out: Path, groups: dict[str, int], seed: int,
             t0 = time.perf_counter()
             res = diagnose_records(recs)
             wall = time.perf_counter() - t0
-            reports = [d.report for d in res.diagnoses]
+            reports = [d.to_dict() for d in res.diagnoses]
             result = plain(res.to_dict(), float)
             write_text_atomic(out / "records" / f"{name}.json", result_json_text(result))
             truth = json.loads(paths[0].with_suffix(".truth.json").read_text())

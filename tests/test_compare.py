@@ -9,15 +9,24 @@ import pytest
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference.compare import change, compare, compare_runs
+from bayes_amb.inference.compare import Z90, change, compare, compare_runs
 from bayes_amb.inference.identify import IdentifyOptions, identify
+from bayes_amb.results import Identification, Posterior
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 from tests.helpers import run_cli
 
 
-def _p(mean: float, sd: float) -> dict:
-    return {"mean": mean, "sd": sd, "unit": "N/m", "physical_sd": sd * 1e6}
+def _p(mean: float, sd: float) -> Posterior:
+    return Posterior(mean=mean, sd=sd, hdi90=[mean - Z90 * sd, mean + Z90 * sd], unit="N/m",
+                     physical_mean=mean * 1e6, physical_sd=sd * 1e6,
+                     physical_hdi90=[(mean - Z90 * sd) * 1e6, (mean + Z90 * sd) * 1e6])
+
+
+def _run(**params: Posterior) -> Identification:
+    return Identification(package_version="test", parameters_estimated=list(params),
+                          priors={}, map={n: p.mean for n, p in params.items()},
+                          inference="test", parameters=params, converged=True)
 
 
 def test_the_probability_is_calibrated_on_its_own_prior():
@@ -48,7 +57,7 @@ def test_the_change_and_its_interval():
     with pytest.raises(BayesAmbError, match="k_By"):
         change("k_By", _p(0.1, float("nan")), _p(0.1, 0.1))
     with pytest.raises(BayesAmbError, match="share no parameter"):
-        compare({"parameters": {"a": _p(0, 1)}}, {"parameters": {"b": _p(0, 1)}})
+        compare(_run(a=_p(0, 1)), _run(b=_p(0, 1)))
 
 
 @pytest.fixture(scope="module")

@@ -130,9 +130,9 @@ def test_identification_through_the_imported_controller_covers_the_truth(tmp_pat
     assert list(rec.excitation) == ["r2"]
     res = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True))
     for n, v in truth.items():
-        p = res.summary["parameters"][n]
-        assert p["sd"] > 0 and abs(p["mean"] - v) < 3.0 * p["sd"], (n, p)
-    assert res.summary["excitation_port"] != "eta"
+        p = res.parameters[n]
+        assert p.sd > 0 and abs(p.mean - v) < 3.0 * p.sd, (n, p)
+    assert res.excitation_port != "eta"
 
 
 def test_a_channel_map_can_name_the_matlab_controller(tmp_path, pid):

@@ -114,7 +114,7 @@ def test_decimation_trimming_and_offset_removal(case):
 def reference_posterior(case):
     """MAP + Laplace of k_By, c_By from the canonical CSV."""
     return identify(case[1], "k_By,c_By", options=IdentifyOptions(map_only=True)
-                    ).summary["parameters"]
+                    ).parameters
 
 
 @pytest.mark.parametrize("fmt", ("mat", "mat73", "tdms", "hdf5"))
@@ -124,13 +124,13 @@ def test_identification_is_the_same_as_from_the_canonical_csv(case, reference_po
     ref = reference_posterior
     src, map_path = _export(case, fmt)
     got = identify(import_recording(src, map_path), "k_By,c_By",
-                   options=opt).summary["parameters"]
+                   options=opt).parameters
     for n in ("k_By", "c_By"):
-        assert np.isfinite(ref[n]["sd"]) and ref[n]["sd"] > 0
-        assert abs(got[n]["mean"] - ref[n]["mean"]) < 0.1 * ref[n]["sd"]
-        assert got[n]["sd"] == pytest.approx(ref[n]["sd"], rel=0.01)
+        assert np.isfinite(ref[n].sd) and ref[n].sd > 0
+        assert abs(got[n].mean - ref[n].mean) < 0.1 * ref[n].sd
+        assert got[n].sd == pytest.approx(ref[n].sd, rel=0.01)
     # and the posterior is about the truth (k_By 0.3, c_By 0.2): within 4 sd
-    assert abs(got["k_By"]["mean"] - 0.3) < 4 * got["k_By"]["sd"]
+    assert abs(got["k_By"].mean - 0.3) < 4 * got["k_By"].sd
 
 
 def test_cli_import_writes_the_canonical_recording(case, capsys):

@@ -72,7 +72,7 @@ def test_effect_free_recording_raises_no_alarm(control):
     regression check of one seed, not the false-alarm rate: that rate is measured on the
     foreign generator's controls (benchmarks/foreign/benchmark.py, README "Diagnosis")."""
     _, _, d = control
-    r = d.report
+    r = d.to_dict()
     assert not r["mismatch"]["detected"]
     assert r["explanations"] == []
     assert r["verdict"] == "no mismatch" and not r["unexplained"]["present"]
@@ -113,7 +113,7 @@ def test_record_habits_are_nuisance_not_physics(ctrl):
     A, B, C, D = (np.asarray(m) for m in (c.A, c.B, c.C, c.D))
     dc = C[:4] @ np.linalg.solve(np.eye(A.shape[0]) - A, B[:, :4]) + D[:4, :4]
     habit = _mid_operation(rec, 3000, y_off, dc @ y_off)
-    r = diagnose(habit).report
+    r = diagnose(habit).to_dict()
     checks = {ch["check"]: ch for ch in r["checks"]}
     assert checks["controller"]["ok"]
     assert not checks["start"]["at_rest"]
@@ -134,13 +134,13 @@ def test_a_controller_that_is_not_the_documented_one_fails_a_check(ctrl):
     Cm = np.array(k.C)
     Cm[:4] *= 1.01
     wrong = dataclasses.replace(rec, controller=dataclasses.replace(k, C=Cm))
-    r = diagnose(wrong, "k_By,c_By").report
+    r = diagnose(wrong, "k_By,c_By").to_dict()
     checks = {ch["check"]: ch for ch in r["checks"]}
     assert not checks["controller"]["ok"] and "FAILED" in checks["controller"]["line"]
     assert r["verdict"] == "data check failed" and r["explanations"] == []
     assert r["summary"].startswith("The data failed a check")
     # and the right controller passes the same check on the same data
-    ok = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=0)).report
+    ok = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=0)).to_dict()
     assert {ch["check"]: ch["ok"] for ch in ok["checks"]}["controller"]
 
 
@@ -151,7 +151,7 @@ def test_a_left_out_coefficient_is_named_before_physics(ctrl):
     cfg = SimulationConfig(truth="reduced", params={"k_By": 0.3, "k_Ax": 0.4}, dt=1e-4,
                            duration=0.5, seed=23, **NOISE)
     rec, _ = simulate_recording(rig, c, cfg)
-    r = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=1)).report
+    r = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=1)).to_dict()
     assert [(e["effect"], e["location"], e["kind"]) for e in r["explanations"]] == [
         ("bearing_coefficient", "k_Ax", "model")]
     v = r["explanations"][0]["params"]["value"]
@@ -174,7 +174,7 @@ def test_concealed_effect_is_named_with_its_parameter(ctrl, effect, name, key, t
     noise_rms = np.sqrt(np.mean((np.asarray(clean.y) - np.asarray(quiet.y)) ** 2, axis=0))
     assert np.all(eff_rms < noise_rms)                 # concealed in the raw signals
     d = diagnose(rec, "k_By,c_By")
-    r = d.report
+    r = d.to_dict()
     assert d.effects == [name]
     e = r["explanations"][0]
     assert e["location"] == loc and e["score"] > 3
@@ -224,7 +224,7 @@ def test_cli_diagnose_writes_the_documented_file(ctrl, tmp_path, capsys):
     d2 = diagnose(load_recording(csv_path), options=DiagnoseOptions(
         candidates=tuple(c for c in all_candidates()
                          if c.effect in ("sensor_gain", "time_delay"))))
-    assert d2.report["explanations"][0]["params"] == r["explanations"][0]["params"]
+    assert d2.to_dict()["explanations"][0]["params"] == r["explanations"][0]["params"]
 
 
 @pytest.mark.parametrize("argv,needle", [
@@ -251,7 +251,7 @@ def test_sampled_posteriors_are_saved_as_emcee_draws(ctrl, tmp_path):
         candidates=tuple(c for c in all_candidates() if c.effect == "sensor_gain"),
         sample=True, steps=60))
     out = d.save(tmp_path / "diag")
-    assert d.report["inference"] == "emcee"
+    assert d.to_dict()["inference"] == "emcee"
     for f in (out / "models").glob("*.nc"):
         ds = xr.load_dataset(f)
         assert ds.attrs["inference"] == "emcee" and ds.sizes["draw"] > 100

@@ -91,9 +91,11 @@ def _screened(gains: dict[str, float]) -> object:
     """A record's diagnosis as joint_search reads it: no failed check, nothing accepted,
     its last round's screens with these gains."""
     from types import SimpleNamespace
-    rows = [{"effect": k.split("@")[0], "location": k.split("@")[1], "round": 1,
-             "screen_gain": g} for k, g in gains.items()]
-    return SimpleNamespace(report={"checks": [], "candidates": rows},
+
+    from bayes_amb.results import CandidateScore
+    rows = [CandidateScore(effect=k.split("@")[0], location=k.split("@")[1], round=1,
+                           screen_gain=g) for k, g in gains.items()]
+    return SimpleNamespace(checks_failed=False, candidates=rows,
                            selection=SimpleNamespace(accepted=[]))
 
 
@@ -131,9 +133,10 @@ def test_the_joint_search_discounts_the_occam_factor_its_records_show(monkeypatc
     be 5 nats per record, so nothing is pointed to and nothing fitted."""
     from bayes_amb.discrepancy import records
     from bayes_amb.discrepancy.diagnose import DiagnoseOptions
+    from bayes_amb.results import CandidateScore
     monkeypatch.setattr(records, "_tested_in", lambda *a, **k: pytest.fail("fitted"))
     d = _screened({"sensor_gain@Ax": 3.0, "actuator_gain@By": 0.5})
-    d.report["candidates"].append({"effect": "sensor_gain", "location": "Bx", "round": 1,
-                                   "screen_gain": 6.0, "log_bayes_factor": 1.0})
+    d.candidates.append(CandidateScore(effect="sensor_gain", location="Bx", round=1,
+                                       screen_gain=6.0, log_bayes_factor=1.0))
     assert records.joint_search([d] * 3, set(), None, DiagnoseOptions(),
                                 [2e4, 2.5e4, 3e4]) == []

@@ -41,7 +41,7 @@ def seal_case(tmp_path_factory, controller_file):
     out = tmp_path_factory.mktemp("seal")
     paths = write_case(replace(spec, effects=(seal,)), out, "seal", rng,
                        conceal_effects=False)
-    report = diagnose(load_recording(paths["csv"])).report
+    report = diagnose(load_recording(paths["csv"])).to_dict()
     return report, json.loads(paths["truth"].read_text())
 
 
@@ -72,7 +72,7 @@ def test_a_mid_span_seal_is_moved_to_its_node(controller_file, tmp_path):
                            "c_direct_nsm": 300.0, "c_cross_nsm": 20.0})
     paths = write_case(replace(spec, effects=(seal,)), tmp_path, "mid", rng,
                        conceal_effects=False)
-    report = diagnose(load_recording(paths["csv"])).report
+    report = diagnose(load_recording(paths["csv"])).to_dict()
     (e,) = report["explanations"]
     assert e["effect"] == "cross_coupling"
     node = int(e["location"][1:])

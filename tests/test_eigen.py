@@ -244,10 +244,10 @@ def test_non_finite_plants_are_flagged_not_raised(forward):
 
 def test_the_kernel_choice_selects_the_modal_form(forward, monkeypatch):
     th = _thetas(3, np.random.default_rng(7))
-    monkeypatch.setenv(kernels.KERNEL_ENV, "lapack")
+    monkeypatch.setattr(forward, "engine", kernels.Engine("lapack"))
     mb_lapack, _ = forward.modal(th)
     ref, _ = _diagonalise_lapack(*forward.excitation_system(th), None)
-    monkeypatch.setenv(kernels.KERNEL_ENV, "numba")
+    monkeypatch.setattr(forward, "engine", kernels.Engine("numba"))
     mb_numba, _ = forward.modal(th)
     assert np.array_equal(mb_lapack.lam, ref.lam) and np.array_equal(mb_lapack.Bm, ref.Bm)
     assert not np.allclose(mb_numba.Bm, ref.Bm)              # another eigenvector scaling

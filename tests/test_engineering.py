@@ -13,7 +13,7 @@ every derived quantity covers its truth in >= 26 of 30 simulated recordings (85 
 
 from __future__ import annotations
 
-from types import SimpleNamespace
+import dataclasses
 
 import numpy as np
 import pytest
@@ -165,10 +165,17 @@ def test_laplace_draws_keep_the_correlations():
     (1 - rho^2)/sqrt(n) = 0.003, so the bound is loose); without it the draws were
     independent (rho 0)."""
     cov = [[0.01**2, -0.9 * 0.01 * 0.02], [-0.9 * 0.01 * 0.02, 0.02**2]]
-    summary = {"parameters": {"k_By": {"mean": 0.3, "sd": 0.01},
-                              "c_By": {"mean": 0.2, "sd": 0.02}},
-               "laplace_cov": {"names": ["k_By", "c_By"], "theta": cov}}
-    src = SimpleNamespace(names=("k_By", "c_By"), summary=summary)
+    from bayes_amb.results import Identification, Posterior
+
+    par = {n: Posterior(mean=m, sd=s, hdi90=[m - 2 * s, m + 2 * s], unit="-",
+                        physical_mean=m, physical_hdi90=[m - 2 * s, m + 2 * s])
+           for n, m, s in (("k_By", 0.3, 0.01), ("c_By", 0.2, 0.02))}
+    src = Identification.from_dict(
+        {"package_version": "test", "parameters_estimated": ["k_By", "c_By"], "priors": {},
+         "map": {"k_By": 0.3, "c_By": 0.2}, "inference": "MAP with Laplace approximation",
+         "parameters": par, "converged": True,
+         "laplace_cov": {"names": ["k_By", "c_By"], "theta": cov}})
+    src = dataclasses.replace(src, names=("k_By", "c_By"))
     th = draws_from(src, 4000, seed=1).theta
     assert np.corrcoef(th.T)[0, 1] == pytest.approx(-0.9, abs=0.063)
     np.testing.assert_allclose(th.std(axis=0), [0.01, 0.02], rtol=4 / np.sqrt(2 * 4000))

@@ -76,28 +76,28 @@ def paper(rig, observer_1ms):
 
 def test_paper_case_recovers_k_by(paper):
     _, res = paper
-    s = res.summary["parameters"]["k_By"]
-    k_map = res.summary["map"]["k_By"]
+    s = res.parameters["k_By"]
+    k_map = res.map["k_By"]
     assert abs(k_map - 0.5) < 1e-9
-    assert abs(s["mean"] - k_map) < 4 * s["sd"] / math.sqrt(s["ess_bulk"])
-    assert 0 < s["sd"] < 1e-6                           # a spike: noise-free data
-    lo, hi = s["hdi90"]
+    assert abs(s.mean - k_map) < 4 * s.sd / math.sqrt(s.ess_bulk)
+    assert 0 < s.sd < 1e-6                              # a spike: noise-free data
+    lo, hi = s.hdi90
     assert lo <= 0.5 <= hi
-    assert res.summary["converged"]
-    assert res.summary["fast_path"] and res.summary["excitation_port"] == "eta"
+    assert res.converged
+    assert res.fast_path and res.excitation_port == "eta"
 
 
 def test_paper_case_map_methods_agree(paper):
     rec, res = paper
     nm = identify(rec, "k_By", options=IdentifyOptions(map_only=True,
                                                        map_method="nelder-mead"))
-    assert nm.summary["map_method"] == "nelder-mead"
-    assert res.summary["map_method"] == "lbfgs"
-    assert abs(nm.summary["map"]["k_By"] - 0.5) < 1e-9
-    assert nm.summary["map"]["k_By"] == pytest.approx(res.summary["map"]["k_By"], abs=1e-9)
-    s = res.summary["parameters"]["k_By"]               # emcee sd against the Laplace sd
-    laplace_sd = nm.summary["parameters"]["k_By"]["sd"]
-    assert abs(s["sd"] / laplace_sd - 1) < 4 / math.sqrt(2 * s["ess_bulk"])
+    assert nm.map_method == "nelder-mead"
+    assert res.map_method == "lbfgs"
+    assert abs(nm.map["k_By"] - 0.5) < 1e-9
+    assert nm.map["k_By"] == pytest.approx(res.map["k_By"], abs=1e-9)
+    s = res.parameters["k_By"]               # emcee sd against the Laplace sd
+    laplace_sd = nm.parameters["k_By"].sd
+    assert abs(s.sd / laplace_sd - 1) < 4 / math.sqrt(2 * s.ess_bulk)
 
 
 @pytest.mark.parametrize(("noise_rms", "max_bias"), [(0.0, 0.002), (1e-7, 0.006)])
@@ -110,11 +110,11 @@ def test_paper_case_on_the_full_truth_has_a_small_bias(rig, observer_1ms, noise_
                            duration=0.5, noise_rms=noise_rms, seed=1)
     rec, _ = simulate_recording(rig, observer_1ms, cfg)
     res = identify(rec, "k_By", options=IdentifyOptions(map_only=True))
-    bias = res.summary["map"]["k_By"] - 0.5
+    bias = res.map["k_By"] - 0.5
     assert 1e-5 < abs(bias) < max_bias      # present (the modes are left out), and small
     if noise_rms == 0:                       # and the run says the model misses something
-        adq = res.summary["adequacy"]
-        assert not adq["adequate"] and adq["line"].startswith("model NOT adequate"), adq
+        adq = res.adequacy
+        assert not adq.adequate and adq.line.startswith("model NOT adequate"), adq
 
 
 # ------------------------------------------------------- several parameters with noise
@@ -135,17 +135,17 @@ def test_several_parameters_recovered_with_noise(noisy3):
     res, _ = noisy3
     covered = 0
     for name, true in TRUTH3.items():
-        v = res.summary["parameters"][name]
-        lo, hi = v["hdi90"]
+        v = res.parameters[name]
+        lo, hi = v.hdi90
         covered += lo <= true <= hi
-        assert abs(v["mean"] - true) < 4 * v["sd"], (name, v)
-        assert 0 < v["sd"] < 0.1, (name, v)                 # informed, not the prior (0.46)
-    assert covered >= len(TRUTH3) - 1, res.summary["parameters"]
-    idf = res.summary["identifiability"]
+        assert abs(v.mean - true) < 4 * v.sd, (name, v)
+        assert 0 < v.sd < 0.1, (name, v)                 # informed, not the prior (0.46)
+    assert covered >= len(TRUTH3) - 1, res.parameters
+    idf = res.identifiability
     assert idf["identifiable"] and idf["notes"] == []
     # a reduced-truth record with white noise: the model with these three free is adequate
-    adq = res.summary["adequacy"]
-    assert adq["adequate"] and adq["failed_checks"] == [], adq
+    adq = res.adequacy
+    assert adq.adequate and adq.failed_checks == [], adq
 
 
 def test_summary_json_has_the_specified_keys(noisy3):
@@ -163,7 +163,7 @@ def test_summary_json_has_the_specified_keys(noisy3):
     assert set(s["noise"]["map"]) == {"sigma_noise", "sigma_r1", "sigma_r2"}
     assert isinstance(s["converged"], bool) and s["wall_s"] > 0
     # the summary on disk is the one returned
-    assert s["map"] == res.summary["map"]
+    assert s["map"] == res.map
 
 
 def test_posterior_netcdf_loads_and_loo_runs(noisy3):
@@ -195,8 +195,8 @@ def test_pid_controller_identifies_k_by(rig):
     rec, _ = simulate(rig, pid, {"k_By": 0.4}, duration=0.2, noise_rms=1e-9)
     assert list(rec.excitation) == ["r2"]
     res = identify(rec, "k_By", options=IdentifyOptions(map_only=True))
-    assert not res.summary["fast_path"] and res.summary["excitation_port"] == "r2"
-    assert abs(res.summary["map"]["k_By"] - 0.4) < 0.01
+    assert not res.fast_path and res.excitation_port == "r2"
+    assert abs(res.map["k_By"] - 0.4) < 0.01
 
 
 # ---------------------------------------------------------------------- identifiability
@@ -204,12 +204,12 @@ def test_unidentifiable_parameter_is_reported(rig, observer_1ms):
     rec, _ = simulate(rig, observer_1ms, {"k_By": 0.3}, duration=0.5, amplitude=0.01,
                       noise_rms=1e-7, r2_rms=0.02, seed=5)
     res = identify(rec, "k_By,c_Ax", options=IdentifyOptions(walkers=16, steps=1000, seed=2))
-    idf = res.summary["identifiability"]
+    idf = res.identifiability
     assert idf["identifiable"] is False
     assert idf["notes"]
     assert any(n.startswith("c_Ax is not identified") for n in idf["notes"]), idf["notes"]
     prior_sd = 1.6 / math.sqrt(12)                     # default uniform(-0.8, 0.8)
-    assert res.summary["parameters"]["c_Ax"]["sd"] > 0.5 * prior_sd
+    assert res.parameters["c_Ax"].sd > 0.5 * prior_sd
 
 
 def test_narrow_band_excitation_leaves_damping_unidentified(rig, observer_1ms):
@@ -221,11 +221,11 @@ def test_narrow_band_excitation_leaves_damping_unidentified(rig, observer_1ms):
                       excitation="multisine", excitation_band_hz=(1.0, 3.0), noise_rms=1e-7,
                       r2_rms=0.02, seed=4)
     res = identify(rec, "k_By,c_By", options=IdentifyOptions(walkers=16, steps=1000, seed=3))
-    notes = res.summary["identifiability"]["notes"]
-    assert res.summary["identifiability"]["identifiable"] is False
+    notes = res.identifiability["notes"]
+    assert res.identifiability["identifiable"] is False
     assert [n.split(" ")[0] for n in notes] == ["c_By"], notes
-    k = res.summary["parameters"]["k_By"]
-    assert k["sd"] < 0.1 and k["hdi90"][0] <= 0.3 <= k["hdi90"][1]
+    k = res.parameters["k_By"]
+    assert k.sd < 0.1 and k.hdi90[0] <= 0.3 <= k.hdi90[1]
 
 
 def test_identifiability_words_for_correlated_and_prior_bound_parameters():
@@ -257,8 +257,8 @@ def test_map_is_not_below_the_truth_with_an_r1_disturbance(rig, observer_1ms):
     post = LogPosterior(res.likelihood, PriorSet.build(res.names))
     at_truth = post(np.array([[0.3, 0.0, *np.log10(list(sigma.values()))]]))[0]
     assert np.isfinite(at_truth)
-    assert res.map.log_post >= at_truth
-    assert res.summary["noise"]["map"]["sigma_r1"]["value"] > 1e-7
+    assert res.map_result.log_post >= at_truth
+    assert res.noise.map["sigma_r1"].value > 1e-7
 
 
 # ---------------------------------------------------------------------- truth deletion
@@ -272,12 +272,12 @@ def test_deleting_truth_changes_no_result(rig, observer_1ms, tmp_path):
     csv_path, json_path = save_recording(tmp_path / "rec.csv", rec, truth=truth)
     assert load_truth(csv_path)["params"] == {"k_By": 0.3, "c_By": 0.1}
     opts = IdentifyOptions(map_only=True)
-    before = identify(load_recording(csv_path), "k_By,c_By", options=opts).summary
+    before = identify(load_recording(csv_path), "k_By,c_By", options=opts).to_dict()
     side = json.loads(json_path.read_text())
     del side["truth"]
     json_path.write_text(json.dumps(side))
     assert load_truth(csv_path) is None
-    after = identify(load_recording(csv_path), "k_By,c_By", options=opts).summary
+    after = identify(load_recording(csv_path), "k_By,c_By", options=opts).to_dict()
     assert _comparable(after) == _comparable(before)
 
 
@@ -352,7 +352,7 @@ def test_map_does_not_run_into_a_prior_corner():
                       r2_rms=0.02, amplitude=0.5, seed=2)
     res = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True))
     post = LogPosterior(res.likelihood, PriorSet.build(("k_By", "c_By"), None))
-    x0 = np.concatenate([[0.5, 0.2], res.map.log10_sigma])
+    x0 = np.concatenate([[0.5, 0.2], res.map_result.log10_sigma])
 
     def neg(x):                          # outside the prior: a large finite value for Powell
         v = float(post(np.asarray(x)[None])[0])
@@ -360,9 +360,9 @@ def test_map_does_not_run_into_a_prior_corner():
 
     ref = so.minimize(neg, x0, method="Powell",
                       options={"xtol": 1e-8, "ftol": 1e-12, "maxfev": 20000})
-    assert res.map.log_post > -ref.fun - 1e-3
+    assert res.map_result.log_post > -ref.fun - 1e-3
     for j, name in enumerate(("k_By", "c_By")):
-        sd = res.summary["parameters"][name]["sd"]
-        assert abs(res.summary["map"][name] - ref.x[j]) < 0.05 * sd, name
-    assert abs(res.summary["map"]["c_By"]) < 0.8 - 3 * res.summary["parameters"]["c_By"]["sd"]
-    assert res.summary["converged"]
+        sd = res.parameters[name].sd
+        assert abs(res.map[name] - ref.x[j]) < 0.05 * sd, name
+    assert abs(res.map["c_By"]) < 0.8 - 3 * res.parameters["c_By"].sd
+    assert res.converged

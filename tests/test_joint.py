@@ -33,18 +33,18 @@ def records():
 
 
 def test_shared_coefficients_add_the_records_precisions(records):
-    own = [identify(r, "k_By,c_By", options=OPT).summary["parameters"] for r in records]
-    joint = identify_joint(records, "k_By,c_By", options=OPT).summary
+    own = [identify(r, "k_By,c_By", options=OPT).parameters for r in records]
+    joint = identify_joint(records, "k_By,c_By", options=OPT).to_dict()
     assert [r["speed_rpm"] for r in joint["records"]] == [31500.0, 20000.0]
     for n, true in TRUTH.items():
-        expect = 1 / np.sqrt(sum(1 / o[n]["sd"] ** 2 for o in own))
+        expect = 1 / np.sqrt(sum(1 / o[n].sd ** 2 for o in own))
         got = joint["parameters"][n]
         assert got["sd"] == pytest.approx(expect, rel=0.15)
         assert abs(got["mean"] - true) < 3.3 * got["sd"]     # two-sided p 0.001
 
 
 def test_a_parameter_per_record(records):
-    s = identify_joint(records, "k_By,c_By", options=OPT, per_record=("c_By",)).summary
+    s = identify_joint(records, "k_By,c_By", options=OPT, per_record=("c_By",)).to_dict()
     assert set(s["parameters"]) == {"k_By", "c_By@1", "c_By@2"}
     for r in (1, 2):
         v = s["parameters"][f"c_By@{r}"]
@@ -75,9 +75,9 @@ def test_records_that_disagree_get_the_random_effects_interval_and_a_line(record
     cfg = SimulationConfig(truth="reduced", params={**TRUTH, "k_By": 0.45}, noise_rms=5e-8,
                            duration=0.5, speed_rpm=31500.0, seed=3)
     changed = simulate_recording(rig, ctrl, cfg)[0]
-    agree = identify_joint(records, "k_By,c_By", options=OPT).summary
+    agree = identify_joint(records, "k_By,c_By", options=OPT).to_dict()
     assert agree["agreement"]["disagree"] == [] and agree["adequacy"]["adequate"]
-    s = identify_joint([*records, changed], "k_By,c_By", options=OPT).summary
+    s = identify_joint([*records, changed], "k_By,c_By", options=OPT).to_dict()
     assert s["agreement"]["disagree"] == ["k_By"]
     assert not s["adequacy"]["adequate"] and "k_By" in s["adequacy"]["line"]
     assert "--per-record k_By" in s["adequacy"]["line"]

@@ -101,9 +101,9 @@ def test_residual_dft_equals_the_numpy_path(rec, width, monkeypatch):
     rng = np.random.default_rng(5)
     for like, p in _likelihoods(rec):
         P = _batch(p, rng)
-        monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+        monkeypatch.setattr(like.forward, "engine", kernels.Engine("numpy"))
         ref, stable = like.residual_dft(P)
-        monkeypatch.setenv(kernels.KERNEL_ENV, "lapack")
+        monkeypatch.setattr(like.forward, "engine", kernels.Engine("lapack"))
         fast, stable_fast = like.residual_dft(P)
         assert stable.all() and np.array_equal(stable, stable_fast)
         r_abs, n_ops = _residual_majorant(like, P)
@@ -112,9 +112,9 @@ def test_residual_dft_equals_the_numpy_path(rec, width, monkeypatch):
         assert not np.all(np.abs(ref * (1 + 1e-9) - ref) <= tol)
         if isinstance(like, RobustWhittle):             # the prediction alone: E, lines out
             Y = like.prediction_dft(P)[0]
-            monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+            monkeypatch.setattr(like.forward, "engine", kernels.Engine("numpy"))
             Y_ref = like.prediction_dft(P)[0]
-            monkeypatch.setenv(kernels.KERNEL_ENV, "lapack")
+            monkeypatch.setattr(like.forward, "engine", kernels.Engine("lapack"))
             assert np.all(np.abs(Y - Y_ref) <= tol)
 
 
@@ -192,9 +192,9 @@ def test_log_likelihood_is_the_same_on_both_paths(rec, monkeypatch):
     for like, p in _likelihoods(rec):
         P = _batch(p, rng)
         ls = np.tile([np.log10(2e-8), -9.0, np.log10(0.02)], (P.shape[0], 1))
-        monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+        monkeypatch.setattr(like.forward, "engine", kernels.Engine("numpy"))
         ref = like.pointwise(P, ls)
-        monkeypatch.setenv(kernels.KERNEL_ENV, "lapack")
+        monkeypatch.setattr(like.forward, "engine", kernels.Engine("lapack"))
         fast = like.pointwise(P, ls)
         bound, n_ops = _majorant(like, P)
         tol_p = 4 * (4 * gamma(n_ops) + gamma(int(like.counts.max()) + 2)) * bound
@@ -223,20 +223,26 @@ def test_default_path_gives_the_numpy_paths_log_likelihood(rec, batch, monkeypat
         P = np.vstack([_batch(p, rng) for _ in range(-(-batch // 7))])[:batch]
         ls = np.tile([np.log10(2e-8), -9.0, np.log10(0.02)], (batch, 1))
         ls[:, 0] += 0.1 * rng.standard_normal(batch)
-        monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")
+        monkeypatch.setattr(like.forward, "engine", kernels.Engine("numpy"))
         ref = like(P, ls)
-        monkeypatch.setenv(kernels.KERNEL_ENV, "numba")
+        monkeypatch.setattr(like.forward, "engine", kernels.Engine("numba"))
         like._last_sums = None
         fast = like(P, ls)
         assert np.all(np.isfinite(ref))
         assert np.all(np.abs(fast - ref) <= 1e-9 * np.abs(ref)), np.max(np.abs(fast / ref - 1))
 
 
-def test_kernel_choice_is_validated(monkeypatch):
+def test_kernel_choice_is_validated_and_made_once_per_model(rec, monkeypatch):
     monkeypatch.setenv(kernels.KERNEL_ENV, "fortran")
     with pytest.raises(Exception, match="BAYES_AMB_KERNEL: expected one of numba, lapack, "
                                         "numpy, got 'fortran'"):
-        kernels.use_compiled()
+        kernels.engine_from_env()
+    with pytest.raises(Exception, match="likelihood engine: expected one of"):
+        kernels.Engine("fortran")
+    monkeypatch.setenv(kernels.KERNEL_ENV, "lapack")
+    like, _ = next(iter(_likelihoods(rec)))
+    monkeypatch.setenv(kernels.KERNEL_ENV, "numpy")       # a model keeps the engine it has
+    assert like.engine == kernels.Engine("lapack") and not like.engine.compiled_modal
 
 
 def test_passes_cover_whole_bands_in_order():

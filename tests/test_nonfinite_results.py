@@ -29,6 +29,7 @@ from bayes_amb.io.nonfinite import restore_non_finite, result_json_text, split_n
 from bayes_amb.report.collect import collect_run
 from bayes_amb.report.render import build_sections, render_html
 from bayes_amb.report.sections import ReportOptions
+from bayes_amb.results import Diagnosis, Identification
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
 
@@ -44,10 +45,10 @@ def results():
                            effects=(parse_effect("actuator_lag:bandwidth_hz=800"),), seed=4,
                            noise_rms=2e-7, r2_rms=0.02)
     rec, _ = simulate_recording(rig, ctrl, cfg)
-    summary = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True)).summary
+    summary = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True)).to_dict()
     opts = DiagnoseOptions(max_effects=1, candidates=all_candidates(("actuator_lag",
                                                                       "time_delay")))
-    report = diagnose(rec, "k_By,c_By", options=opts).report
+    report = diagnose(rec, "k_By,c_By", options=opts).to_dict()
     return json.loads(json.dumps(summary)), json.loads(json.dumps(report))
 
 
@@ -112,8 +113,8 @@ def test_non_finite_results_never_crash(results, tmp_path, capsys):
                 assert _same(_get(back, path), value), (case, name, path)
             write_text_atomic(run_dir / name, text)
         # the command texts and --json output
-        format_summary(summary)
-        format_report(report)
+        format_summary(Identification.from_dict(summary))
+        format_report(Diagnosis.from_dict(report))
         emit(report, "", as_json=True)
         out = capsys.readouterr().out
         parse_json_text(out)

@@ -59,7 +59,7 @@ def test_the_prediction_is_the_posterior_sd_identify_reports(rig_ctrl, base):
     res = identify(rec, BEARING_COEFFICIENTS,
                    options=IdentifyOptions(map_only=True, adequacy=False))
     for n in BEARING_COEFFICIENTS:
-        assert res.summary["parameters"][n]["sd"] / base.sd(n) == pytest.approx(1, abs=0.3)
+        assert res.parameters[n].sd / base.sd(n) == pytest.approx(1, abs=0.3)
 
 
 def test_plan_cli(capsys):
@@ -94,7 +94,7 @@ def test_detectability_matches_the_diagnosis(rig_ctrl):
     assert r["detected"] and r["probability_detected"] > 0.99
     rec, _ = simulate_recording(*rig_ctrl, SimulationConfig(
         truth="reduced", effects=(e,), noise_rms=5e-8, duration=2.0, seed=5))
-    found = diagnose(rec).report["explanations"]
+    found = diagnose(rec).to_dict()["explanations"]
     assert [(x["effect"], x["location"]) for x in found] == [("sensor_gain", "By")]
     assert abs(found[0]["score"] - r["expected_log_bayes_factor"]) < 3 * r["scatter_of_log_bf"]
     weak = detectability(*rig_ctrl, Design(duration=2.0), Noise(noise_rms=5e-8),

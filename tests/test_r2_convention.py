@@ -113,6 +113,6 @@ def test_identification_with_r2_on_the_observer_controller(rig, controllers):
     ForwardModel): k_By = 0.3 is recovered within 4 Laplace sd."""
     rec = _record(rig, controllers["observer"], "r2", seed=11, duration=0.5)
     res = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True))
-    k = res.summary["parameters"]["k_By"]
-    assert 0 < k["sd"] < 0.1
-    assert abs(k["mean"] - 0.3) < 4 * k["sd"]
+    k = res.parameters["k_By"]
+    assert 0 < k.sd < 0.1
+    assert abs(k.mean - 0.3) < 4 * k.sd

@@ -29,6 +29,7 @@ from bayes_amb.report.derived import Derived, residual_tests
 from bayes_amb.report.render import build_sections
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
+from tests.helpers import diagnosis_json
 
 pypdf = pytest.importorskip("pypdf")
 pytest.importorskip("jinja2")
@@ -56,7 +57,7 @@ def made(tmp_path_factory):
     result = identify(load_recording(csv), "k_By", options=IdentifyOptions(steps=300,
                                                                            walkers=12))
     run_dir = result.save(d / "run")
-    return {"dir": d, "csv": csv, "other": other, "run": run_dir, "summary": result.summary}
+    return {"dir": d, "csv": csv, "other": other, "run": run_dir, "summary": result.to_dict()}
 
 
 @pytest.fixture(scope="module")
@@ -91,13 +92,7 @@ def bare(made, tmp_path_factory):
     summary = json.loads((d / "summary.json").read_text())
     summary["recording"] = "nowhere/missing.csv"
     (d / "summary.json").write_text(json.dumps(summary))
-    (d / "diagnosis.json").write_text(json.dumps(
-        {"summary": "actuator lag <b>suspected</b>",
-         "mismatch": {"detected": True, "channels": ["Ax"], "bands_hz": [[100.0, 200.0]],
-                      "time_s": None, "evidence": {"strength": "strong"}},
-         "explanations": [{"effect": "actuator_lag", "location": "both", "score": 3.2,
-                           "params": {"bandwidth_hz": {"mean": 2500.0, "hdi90": [2400, 2600],
-                                                       "unit": "Hz"}}}]}))
+    (d / "diagnosis.json").write_text(json.dumps(diagnosis_json()))
     study = d.parent / "study"
     (study / "figures").mkdir(parents=True)
     from matplotlib.figure import Figure
@@ -200,6 +195,13 @@ def test_optional_sections_when_inputs_present(bare):
     assert run.recording is None and run.diagnosis is not None
 
 
+def _changed(run, **blocks):
+    """The run with its diagnosis changed in the given top-level blocks (JSON form)."""
+    from bayes_amb.results import Diagnosis
+    return dataclasses.replace(run, diagnosis=Diagnosis.from_dict(
+        {**run.diagnosis.to_dict(), **blocks}))
+
+
 @pytest.mark.parametrize(("unexplained", "shown"), [
     ({"present": True, "channels": ["Ax", "By"], "bands_hz": [[2606.0, 3606.0]],
       "findings": [{"test": "coherence", "p_adjusted": 6e-4}],
@@ -208,18 +210,15 @@ def test_optional_sections_when_inputs_present(bare):
      "structure coherent with the excitation on channel(s) Ax, By in 2606–3606 Hz that no "
      "model in the library explains"),
     ({"present": False, "channels": [], "bands_hz": [], "findings": []}, None),
-    ("a lag near 900 Hz", "a lag near 900 Hz"),
 ])
 def test_summary_states_the_unexplained_part_in_words(bare, unexplained, shown):
-    """diagnosis.json's "unexplained" is a dict since the physics library (a string
-    before): the summary names channels and bands in one clause, never the dict itself
-    (the demo's summary printed its repr over two pages), and says nothing when
-    "present" is false."""
+    """diagnosis.json's "unexplained": the summary names channels and bands in one clause,
+    never the block itself (the demo's summary printed its repr over two pages), and says
+    nothing when "present" is false."""
     from bayes_amb.report.render import summary_section
 
     run = bare[0]
-    diagnosis = dict(run.diagnosis, unexplained=unexplained)
-    sec = summary_section(dataclasses.replace(run, diagnosis=diagnosis), {})
+    sec = summary_section(_changed(run, unexplained=unexplained), {})
     text = " ".join(sec.bullets + sec.paragraphs)
     assert "{" not in text and "present" not in text
     if shown is None:
@@ -235,15 +234,14 @@ def test_summary_leads_with_the_final_models_adequacy(bare):
     from bayes_amb.report.render import summary_section
 
     run = bare[0]
-    diagnosis = dict(run.diagnosis,
-                     adequacy={"adequate": False, "line": "model NOT adequate: nominal."},
-                     adequacy_after={"adequate": True, "line": "model adequate: final."})
-    sec = summary_section(dataclasses.replace(run, diagnosis=diagnosis), {})
+    changed = _changed(run,
+                       adequacy={"adequate": False, "line": "model NOT adequate: nominal."},
+                       adequacy_after={"adequate": True, "line": "model adequate: final."})
+    sec = summary_section(changed, {})
     assert sec.bullets[0] == ("Adequacy of the final model (after the diagnosis): model "
                               "adequate: final. The nominal model: model NOT adequate: "
                               "nominal.")
-    sec = summary_section(dataclasses.replace(run, diagnosis=dict(
-        diagnosis, explanations=[])), {})
+    sec = summary_section(_changed(changed, explanations=[]), {})
     assert sec.bullets[0] == "Adequacy of the model: model NOT adequate: nominal."
 
 
@@ -351,6 +349,18 @@ def _candidates_report(n_rounds: int = 3, n_per_round: int = 37) -> dict:
             "explanations": [{"effect": effects[0][0], "location": effects[0][1]}]}
 
 
+def _as_diagnosis(report: dict):
+    """The parts of a Diagnosis plot_candidates reads, typed."""
+    from types import SimpleNamespace
+
+    from bayes_amb.results import CandidateScore
+    return SimpleNamespace(
+        candidates=[CandidateScore.from_dict(r) for r in report["candidates"]],
+        criterion=report["criterion"],
+        explanations=[SimpleNamespace(key=f"{e['effect']}@{e['location']}")
+                      for e in report["explanations"]])
+
+
 def test_candidate_figure_is_legible():
     """The evidence figure of a diagnosis with 37 candidates per round (the demo's): every
     text >= 7 pt as printed, no two candidate labels of a panel overlap (they were ~5 pt
@@ -359,7 +369,7 @@ def test_candidate_figure_is_legible():
     from bayes_amb.plots.discrepancy import CANDIDATES_SHOWN, plot_candidates
 
     report = _candidates_report()
-    fig = plot_candidates(report)
+    fig = plot_candidates(_as_diagnosis(report))
     small = [(round(size, 2), t[:30]) for size, t in _visible_font_sizes(fig) if size < 7.0]
     assert not small, small
     renderer = fig.canvas.get_renderer()
@@ -483,18 +493,19 @@ def test_a_named_unbalance_shows_its_correction_planes(bare):
 
     run = bare[0]
     plane = {"plane": "D2", "z_m": 0.45, "nonzero": True,
-             "u_kgm": {"mean": 1.9e-6, "map": 1.92e-6, "hdi90": [1.86e-6, 1.99e-6]},
-             "phase_deg": {"mean": 40.0, "map": 39.6, "hdi90": [37.7, 41.5]}}
-    with_bal = dict(run.diagnosis, balancing={"planes": [dict(plane, plane="D1", z_m=0.0),
-                                                         plane]})
-    tables = {t.caption: t for t in discrepancy_section(
-        dataclasses.replace(run, diagnosis=with_bal)).tables}
+             "u_kgm": {"mean": 1.9e-6, "map": 1.92e-6, "hdi90": [1.86e-6, 1.99e-6],
+                       "unit": "kg m"},
+             "phase_deg": {"mean": 40.0, "map": 39.6, "hdi90": [37.7, 41.5], "unit": "deg"},
+             "ab_kgm": {}}
+    with_bal = _changed(run, balancing={"planes": [dict(plane, plane="D1", z_m=0.0), plane],
+                                        "from": ["unbalance@n20"]})
+    tables = {t.caption: t for t in discrepancy_section(with_bal).tables}
     rows = tables["Unbalance as two correction planes"].rows
     assert [r[0] for r in rows] == ["D1", "D2"] and rows[1][2] == "1.92e-06"
     assert rows[0][-1] == "1.92e-06 kg m at 220°"        # D1 here a copy, nonzero
     no = dict(plane, nonzero=False)
-    tables = {t.caption: t for t in discrepancy_section(dataclasses.replace(
-        run, diagnosis=dict(run.diagnosis, balancing={"planes": [no, plane]}))).tables}
+    tables = {t.caption: t for t in discrepancy_section(_changed(
+        run, balancing={"planes": [no, plane], "from": ["unbalance@n20"]})).tables}
     assert tables["Unbalance as two correction planes"].rows[0][-1] == "none (not told from 0)"
     assert "Unbalance as two correction planes" not in {
         t.caption for t in discrepancy_section(run).tables}

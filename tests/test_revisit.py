@@ -103,8 +103,11 @@ def test_one_effect_is_not_revisited(monkeypatch):
 
 
 def test_a_swap_is_told_in_the_paragraph_and_drawn_without_the_revisit_rows():
+    from types import SimpleNamespace
+
     from bayes_amb.discrepancy.story import _swaps
     from bayes_amb.plots.discrepancy import plot_candidates
+    from bayes_amb.results import CandidateScore
     rows = [{"effect": "actuator_2nd", "location": "both", "round": 1, "screen_gain": 10.0,
              "log_bayes_factor": 11306.0, "log_posterior_odds": 11302.5},
             {"effect": "time_delay", "location": "controller", "round": 1, "screen_gain": 9.0,
@@ -112,13 +115,14 @@ def test_a_swap_is_told_in_the_paragraph_and_drawn_without_the_revisit_rows():
             {"effect": "time_delay", "location": "controller", "round": "revisit",
              "screen_gain": None, "log_bayes_factor": 3536.8, "log_posterior_odds": None,
              "instead_of": "actuator_2nd@both", "chosen_log_bayes_factor": 3525.1}]
-    text = _swaps(rows)
+    text = _swaps([CandidateScore.from_dict(r) for r in rows])
     assert "time_delay@controller" in text and "actuator_2nd@both" in text and "3536.8" in text
-    assert _swaps(rows[:2]) == ""
+    assert _swaps([CandidateScore.from_dict(r) for r in rows[:2]]) == ""
     rows[2]["log_bayes_factor"] = 3500.0                 # the choice stood: nothing to tell
-    assert _swaps(rows) == ""
-    fig = plot_candidates({"candidates": rows, "explanations": [
-        {"effect": "time_delay", "location": "controller"}]})
+    assert _swaps([CandidateScore.from_dict(r) for r in rows]) == ""
+    fig = plot_candidates(SimpleNamespace(
+        candidates=[CandidateScore.from_dict(r) for r in rows], criterion="",
+        explanations=[SimpleNamespace(key="time_delay@controller")]))
     assert len(fig.axes) >= 1
 
 

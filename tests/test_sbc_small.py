@@ -105,16 +105,16 @@ def rank_draws(samples: np.ndarray, tau: float, rng: np.random.Generator) -> np.
 
 def _posterior_stats(res, theta: np.ndarray, rng: np.random.Generator) -> DatasetResult:
     p = len(NAMES)
-    thin = int(res.summary["sampler"]["thin"])
-    tau = np.array([res.summary["parameters"][n]["tau"] for n in NAMES])
+    thin = int(res.sampler.thin)
+    tau = np.array([res.parameters[n].tau for n in NAMES])
     flat = res.samples.reshape(-1, res.samples.shape[-1])[:, :p]
     draws = rank_draws(res.samples[..., :p], float(tau.max()) / thin, rng)
     q = np.quantile(flat, [0.05, 0.25, 0.75, 0.95], axis=0)
     return DatasetResult(theta=theta, rank=np.sum(draws < theta, axis=0),
                          cover50=(q[1] <= theta) & (theta <= q[2]),
                          cover90=(q[0] <= theta) & (theta <= q[3]), sd=flat.std(axis=0),
-                         converged=bool(res.summary["converged"]),
-                         wall_s=float(res.summary["wall_s"]))
+                         converged=bool(res.converged),
+                         wall_s=float(res.wall_s))
 
 
 def run_dataset(i: int, theta: np.ndarray, models: tuple[str, ...] = NOISE_MODELS

@@ -555,8 +555,8 @@ def test_truth_never_reaches_the_identification(rig, controllers, tmp_path):
                  (r1.excitation["eta"], r2.excitation["eta"])):
         np.testing.assert_array_equal(a, b)
     opts = IdentifyOptions(map_only=True)
-    m1 = identify(r1, "k_By", options=opts).map
-    m2 = identify(r2, "k_By", options=opts).map
+    m1 = identify(r1, "k_By", options=opts).map_result
+    m2 = identify(r2, "k_By", options=opts).map_result
     np.testing.assert_array_equal(m1.theta, m2.theta)
     np.testing.assert_array_equal(m1.log10_sigma, m2.log10_sigma)
     assert abs(m1.theta[0] - 0.5) < 0.05                  # sanity: the MAP is near the truth

@@ -46,19 +46,19 @@ def test_simulate_identify_diagnose_end_to_end(rig_ctrl, tmp_path):
     assert rec.rig.name == "small_rotor" and rec.rig.n_nodes == 36
     # the nominal model leaves the lag out: damping is driven to its prior bound
     nominal = identify(rec, "k_By,c_By", options=IdentifyOptions(map_only=True))
-    assert nominal.summary["map"]["c_By"] == pytest.approx(-0.8, abs=1e-3)
+    assert nominal.map["c_By"] == pytest.approx(-0.8, abs=1e-3)
     cands = tuple(c for c in all_candidates()
                   if (c.effect, c.location) in {("actuator_lag", "both"),
                                                 ("time_delay", "controller")})
     d = diagnose(rec, "k_By,c_By", options=DiagnoseOptions(max_effects=1, candidates=cands))
     assert d.effects == ["actuator_lag"]
-    bw = d.report["explanations"][0]["params"]["bandwidth_hz"]["mean"]
+    bw = d.explanations[0].params["bandwidth_hz"].mean
     assert bw == pytest.approx(1500.0, rel=0.05)
-    after = d.report["parameters_after"]
+    after = d.parameters_after
     for n, v in truth.items():       # with the lag modelled, both are covered (3 sd)
-        assert abs(after[n]["mean"] - v) < 3 * after[n]["sd"], (n, after[n])
-    assert np.isfinite(d.report["fit"]["log_likelihood_gain"])
-    assert d.report["fit"]["log_likelihood_gain"] > 3
+        assert abs(after[n].mean - v) < 3 * after[n].sd, (n, after[n])
+    assert np.isfinite(d.fit.log_likelihood_gain)
+    assert d.fit.log_likelihood_gain > 3
 
 
 def _short_rig(n_nodes=25):

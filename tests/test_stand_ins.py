@@ -7,6 +7,7 @@ import pytest
 
 from bayes_amb.discrepancy.library.registry import REGISTRY
 from bayes_amb.discrepancy.stand_ins import stand_in_sentence, stand_ins
+from bayes_amb.results.diagnosis import StandIn
 
 
 def _effect(effect: str, location: str, **hdi: tuple[float, float]) -> dict:
@@ -22,7 +23,7 @@ def test_a_bending_mode_with_the_damping_of_a_lag_is_a_stand_in():
                                                                "damping_ratio")]
     assert found[0]["plausible"] == [0.0, 0.2]
     assert "0.68" in found[0]["line"] and "bending pair 3" in found[0]["line"]
-    assert "tentative" in stand_in_sentence(found)
+    assert "tentative" in stand_in_sentence([StandIn.from_dict(s) for s in found])
 
 
 @pytest.mark.parametrize("hdi", [(0.0029, 0.0032), (0.15, 0.25), (0.19, 0.9)])

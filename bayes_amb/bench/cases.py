@@ -139,11 +139,10 @@ def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
     the median wall time (``wall_us``) and CPU time (``cpu_us``, ``time.process_time``) of
     one evaluation, and the largest relative difference of its log posteriors from the numpy
     path's (``rel_err``; BenchmarkError above CHECK_RTOL)."""
-    import os
+    from bayes_amb.inference.kernels import KERNEL_MODES, Engine
 
-    from bayes_amb.inference.kernels import KERNEL_ENV, KERNEL_MODES
-
-    saved = os.environ.get(KERNEL_ENV)
+    forward = post.likelihood.forward
+    chosen = forward.engine
     wall: dict[str, list[float]] = {k: [] for k in KERNEL_MODES}
     cpu: dict[str, list[float]] = {k: [] for k in KERNEL_MODES}
     values = {}
@@ -151,7 +150,7 @@ def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
         for r in range(repeats + 1):
             shift = r % len(KERNEL_MODES)
             for kind in KERNEL_MODES[shift:] + KERNEL_MODES[:shift]:
-                os.environ[KERNEL_ENV] = kind
+                forward.engine = Engine(kind)
                 post.likelihood._last_sums = None    # no remembered batch: a real evaluation
                 c0, t0 = time.process_time(), time.perf_counter()
                 values[kind] = post(points)
@@ -160,10 +159,7 @@ def _kernel_side_by_side(post: LogPosterior, points: NDArray, repeats: int
                     wall[kind].append(t1 - t0)
                     cpu[kind].append(c1 - c0)
     finally:
-        if saved is None:
-            os.environ.pop(KERNEL_ENV, None)
-        else:
-            os.environ[KERNEL_ENV] = saved
+        forward.engine = chosen
     n = points.shape[0]
     out = {}
     for kind in KERNEL_MODES:
@@ -184,19 +180,18 @@ def _identify_side(rec: Recording, names: tuple[str, ...], truth: dict[str, floa
                    moves: str, steps: int | None) -> tuple[SamplerSide, dict]:
     """identify with the given sampler moves, timed in CPU and wall time."""
     c0, w0 = time.process_time(), time.perf_counter()
-    s = identify(rec, names, options=IdentifyOptions(steps=steps, moves=moves)).summary
+    res = identify(rec, names, options=IdentifyOptions(steps=steps, moves=moves))
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    pars = tuple(ParamRecovery(name=n, true=truth[n], mean=v["mean"], sd=v["sd"],
-                               bias=v["mean"] - truth[n], r_hat=v["r_hat"],
-                               ess_bulk=v["ess_bulk"])
-                 for n, v in s["parameters"].items())
-    samp = s["sampler"]
-    side = SamplerSide(moves=moves, cpu_s=cpu, wall_s=wall, posterior_s=samp["wall_s"],
-                       steps=samp["steps"], likelihood_evals=samp["likelihood_evals"],
-                       n_tau=samp["n_tau"], max_r_hat=max(p.r_hat for p in pars),
-                       min_ess=min(p.ess_bulk for p in pars), converged=s["converged"],
+    pars = tuple(ParamRecovery(name=n, true=truth[n], mean=v.mean, sd=v.sd,
+                               bias=v.mean - truth[n], r_hat=v.r_hat, ess_bulk=v.ess_bulk)
+                 for n, v in res.parameters.items())
+    samp = res.sampler
+    side = SamplerSide(moves=moves, cpu_s=cpu, wall_s=wall, posterior_s=samp.wall_s,
+                       steps=samp.steps, likelihood_evals=samp.likelihood_evals,
+                       n_tau=samp.n_tau, max_r_hat=max(p.r_hat for p in pars),
+                       min_ess=min(p.ess_bulk for p in pars), converged=res.converged,
                        parameters=pars)
-    return side, s
+    return side, res.to_dict()
 
 
 def bench_posterior(quick: bool = False) -> PosteriorBench:

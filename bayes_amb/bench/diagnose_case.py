@@ -46,12 +46,12 @@ def bench_diagnose(quick: bool = False) -> DiagnoseBench:
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     if "actuator_lag" not in d.effects:
         raise BenchmarkError(f"diagnose benchmark: the hidden actuator lag was not named "
-                             f"(named {d.effects}, verdict {d.report['verdict']!r})")
-    if (d.effects, d.report["verdict"]) != (full.effects, full.report["verdict"]):
+                             f"(named {d.effects}, verdict {d.verdict!r})")
+    if (d.effects, d.verdict) != (full.effects, full.verdict):
         raise BenchmarkError(f"diagnose benchmark: pre-screening changed the diagnosis "
-                             f"({d.effects}, {d.report['verdict']!r} against "
-                             f"{full.effects}, {full.report['verdict']!r} screened fully)")
+                             f"({d.effects}, {d.verdict!r} against "
+                             f"{full.effects}, {full.verdict!r} screened fully)")
     return DiagnoseBench(cpu_s=cpu, wall_s=wall, target_median_s=TARGET_MEDIAN_S,
                          duration_s=duration, n_samples=int(rec.y.shape[0]),
-                         effects=tuple(d.effects), verdict=d.report["verdict"],
+                         effects=tuple(d.effects), verdict=d.verdict,
                          full_screen_cpu_s=full_cpu, speedup=full_cpu / cpu)

@@ -51,7 +51,7 @@ def bench_plan(quick: bool = False) -> PlanBench:
     t0 = time.perf_counter()
     res = identify(rec, BEARING_COEFFICIENTS, options=IdentifyOptions(map_only=True))
     ident = time.perf_counter() - t0
-    ratio = max(res.summary["parameters"][n]["sd"] / p.sd(n) for n in BEARING_COEFFICIENTS)
+    ratio = max(res.parameters[n].sd / p.sd(n) for n in BEARING_COEFFICIENTS)
     plan_s = float(np.median(walls))
     return PlanBench(plan_s=plan_s, identify_s=ident, study_s=50 * ident,
                      speedup=50 * ident / plan_s, requirement_s=5.0, max_sd_ratio=float(ratio))

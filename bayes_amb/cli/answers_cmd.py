@@ -62,8 +62,8 @@ def run(args: argparse.Namespace) -> int:
     draws, source = final_draws(run_data, args.draws, 0)
     res = physical_quantities(draws, run_data.recording, _speeds(args.speeds),
                               n_draws=args.draws, model=args.model)
-    data = res.to_dict()
-    data["source"] = source
+    answers = res.answers(source)
+    data = answers.to_dict()
     if args.out:
         write_text_atomic(args.out, result_json_text(to_jsonable(data)))
     lines = [f"{k:<52} {q.value:>12.5g}  [{q.lo:.5g}, {q.hi:.5g}]  {q.unit}"

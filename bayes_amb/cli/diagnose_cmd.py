@@ -25,6 +25,7 @@ from bayes_amb.discrepancy.balancing import check_planes
 from bayes_amb.discrepancy.library.registry import scanned_effects
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import load_recording
+from bayes_amb.results.diagnosis import Diagnosis
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -78,58 +79,57 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def format_report(r: dict) -> str:
-    mm = r["mismatch"]
-    lines = [f"Diagnosis of {r['recording']} ({r['inference']}, {r['wall_s']:.0f} s)"]
-    lines += [f"check         : {c['line']}" for c in r.get("checks", [])]
-    lines += [f"verdict       : {r.get('verdict', '')}",
-             f"mismatch      : {'DETECTED' if mm['detected'] else 'none'}"
-             + (f" on {', '.join(mm['channels'])}" if mm["channels"] else "")
-             + (f"; bands {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in mm['bands_hz'])}"
-                if mm["bands_hz"] else "")
-             + (f"; time {mm['time_s'][0]:.2f}-{mm['time_s'][1]:.2f} s" if mm["time_s"]
-                else "")
-             + f" (evidence {mm['evidence']['strength']})"]
-    noise = sorted({f["test"] for f in mm.get("noise_findings", [])})
+def format_report(d: Diagnosis) -> str:
+    """The terminal table of a diagnosis."""
+    mm = d.mismatch
+    wall = f", {d.wall_s:.0f} s" if d.wall_s is not None else ""
+    lines = [f"Diagnosis of {d.recording} ({d.inference}{wall})"]
+    lines += [f"check         : {c.line}" for c in d.checks]
+    lines += [f"verdict       : {d.verdict}",
+              f"mismatch      : {'DETECTED' if mm.detected else 'none'}"
+              + (f" on {', '.join(mm.channels)}" if mm.channels else "")
+              + (f"; bands {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in mm.bands_hz)}"
+                 if mm.bands_hz else "")
+              + (f"; time {mm.time_s[0]:.2f}-{mm.time_s[1]:.2f} s" if mm.time_s else "")
+              + f" (evidence {mm.evidence.strength})"]
+    noise = sorted({f.test for f in mm.noise_findings})
     if noise:
         lines.append(f"noise         : {' and '.join(noise)} tests fail (the noise is not the "
                      "loop noise model's: a habit, not a mismatch)")
-    if r["explanations"]:
-        for e in r["explanations"]:
-            ps = ", ".join(f"{k} {v['map']:.4g} [{v['hdi90'][0]:.4g}, {v['hdi90'][1]:.4g}] "
-                           f"{v['unit']}" for k, v in e["params"].items())
-            cls = e.get("equivalence_class", [])
-            same = f"; cannot be told from {', '.join(cls[1:])}" if len(cls) > 1 else ""
-            if e.get("node_range") and e["node_range"][0] != e["node_range"][1]:
-                same += f"; nodes {e['node_range'][0]}-{e['node_range'][1]} fit as well"
-            lines.append(f"explanation   : {e['effect']} at {e['location']}: {ps} "
-                         f"(log BF {e['score']:.1f}, {e.get('confidence', 'confident')}{same})")
-    else:
+    for e in d.explanations:
+        ps = ", ".join(f"{k} {v.map:.4g} [{v.hdi90[0]:.4g}, {v.hdi90[1]:.4g}] {v.unit}"
+                       for k, v in e.params.items())
+        cls = e.equivalence_class
+        same = f"; cannot be told from {', '.join(cls[1:])}" if len(cls) > 1 else ""
+        if e.node_range and e.node_range[0] != e.node_range[1]:
+            same += f"; nodes {e.node_range[0]}-{e.node_range[1]} fit as well"
+        lines.append(f"explanation   : {e.effect} at {e.location}: {ps} "
+                     f"(log BF {e.score:.1f}, {e.confidence}{same})")
+    if not d.explanations:
         lines.append("explanation   : none named")
-    for s in r.get("stand_ins") or []:
-        lines.append(f"stand-in      : {s['line']}")
-    for pl in (r.get("balancing") or {}).get("planes", []):
-        u, ph = pl["u_kgm"], pl["phase_deg"]
-        lines.append(f"balancing     : plane {pl['plane']}: {u['map']:.3g} [{u['hdi90'][0]:.3g}, "
-                     f"{u['hdi90'][1]:.3g}] kg m at {ph['map']:.0f} [{ph['hdi90'][0]:.0f}, "
-                     f"{ph['hdi90'][1]:.0f}] deg"
-                     + (" (correction mass opposite)" if pl.get("nonzero")
+    lines += [f"stand-in      : {s.line}" for s in d.stand_ins]
+    for pl in d.balancing.planes if d.balancing is not None else []:
+        u, ph = pl.u_kgm, pl.phase_deg
+        lines.append(f"balancing     : plane {pl.plane}: {u.map:.3g} [{u.hdi90[0]:.3g}, "
+                     f"{u.hdi90[1]:.3g}] kg m at {ph.map:.0f} [{ph.hdi90[0]:.0f}, "
+                     f"{ph.hdi90[1]:.0f}] deg"
+                     + (" (correction mass opposite)" if pl.nonzero
                         else " (not told from 0: no correction needed)"))
-    un = r.get("unexplained") or {}
-    if un.get("present"):
-        lines.append(f"unexplained   : structure on {', '.join(un['channels'])}"
-                     + (f" in {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in un['bands_hz'])}"
-                        if un["bands_hz"] else ""))
-    fb, fa = r["fit"]["before"], r["fit"]["after"]
-    lines.append("NRMSE         : " + ", ".join(f"{c} {fb['nrmse'][c]:.4f} -> {fa['nrmse'][c]:.4f}"
-                                              for c in fb["nrmse"]))
+    un = d.unexplained
+    if un.present:
+        lines.append(f"unexplained   : structure on {', '.join(un.channels)}"
+                     + (f" in {', '.join(f'{a:.0f}-{b:.0f} Hz' for a, b in un.bands_hz)}"
+                        if un.bands_hz else ""))
+    fb, fa = d.fit.before, d.fit.after
+    lines.append("NRMSE         : " + ", ".join(f"{c} {fb.nrmse[c]:.4f} -> {fa.nrmse[c]:.4f}"
+                                              for c in fb.nrmse))
     lines.append("whiteness p   : " + ", ".join(
-        f"{c} {fb['whiteness_p'][c]:.2g} -> {fa['whiteness_p'][c]:.2g}" for c in fb["nrmse"]))
-    for n, v in r["parameters_before"].items():
-        a = r["parameters_after"][n]
-        lines.append(f"{n:<14}: {v['mean']:+.4f} [{v['hdi90'][0]:+.4f}, {v['hdi90'][1]:+.4f}]"
-                     f" -> {a['mean']:+.4f} [{a['hdi90'][0]:+.4f}, {a['hdi90'][1]:+.4f}]")
-    lines.append(r["summary"])
+        f"{c} {fb.whiteness_p[c]:.2g} -> {fa.whiteness_p[c]:.2g}" for c in fb.nrmse))
+    for n, v in d.parameters_before.items():
+        a = d.parameters_after[n]
+        lines.append(f"{n:<14}: {v.mean:+.4f} [{v.hdi90[0]:+.4f}, {v.hdi90[1]:+.4f}]"
+                     f" -> {a.mean:+.4f} [{a.hdi90[0]:+.4f}, {a.hdi90[1]:+.4f}]")
+    lines.append(d.story)
     return "\n".join(lines)
 
 
@@ -171,8 +171,7 @@ def run(args: argparse.Namespace) -> int:
         return _run_records(args, recs, priors, opt)
     d = diagnose(rec, args.params, priors, opt)
     d.save(args.out)
-    report = to_jsonable(d.report)
-    emit(report, format_report(report) + f"\nwrote {args.out}/diagnosis.json, "
+    emit(to_jsonable(d.to_dict()), format_report(d) + f"\nwrote {args.out}/diagnosis.json, "
          f"{args.out}/residuals.nc and {args.out}/models/", args.json)
     return 0
 

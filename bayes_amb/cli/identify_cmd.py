@@ -17,6 +17,7 @@ from bayes_amb.cli.options import integer, seed
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.io.recording import load_recording
+from bayes_amb.results.identification import Identification
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -77,44 +78,49 @@ def _progress_bar(enabled: bool):
     return update, bar
 
 
-def format_summary(s: dict) -> str:
-    lines = [f"Identification of {s['recording']} ({s['inference']}, "
-             f"{'converged' if s['converged'] else 'NOT converged'}, {s['wall_s']:.1f} s)",
+def format_summary(s: Identification) -> str:
+    """The terminal table of one recording's identification."""
+    wall = f", {s.wall_s:.1f} s" if s.wall_s is not None else ""
+    lines = [f"Identification of {s.recording} ({s.inference}, "
+             f"{'converged' if s.converged else 'NOT converged'}{wall})",
              f"{'param':<7} {'MAP':>9} {'mean':>9} {'sd':>9} {'90% HDI':>21} "
              f"{'physical mean':>16} {'R-hat':>6} {'ESS':>6} {'tau':>6}"]
-    for n, v in s["parameters"].items():
-        lo, hi = v["hdi90"]
-        rh = f"{v['r_hat']:.3f}" if v["r_hat"] is not None else "-"
-        ess = f"{v['ess_bulk']:.0f}" if v["ess_bulk"] is not None else "-"
-        tau = f"{v['tau']:.1f}" if v["tau"] is not None else "-"
-        lines.append(f"{n:<7} {s['map'][n]:>9.4f} {v['mean']:>9.4f} {v['sd']:>9.3g} "
-                     f"[{lo:>8.4f}, {hi:>8.4f}] {v['physical_mean']:>11.4g} {v['unit']:<4} "
+    for n, v in s.parameters.items():
+        lo, hi = v.hdi90
+        rh = f"{v.r_hat:.3f}" if v.r_hat is not None else "-"
+        ess = f"{v.ess_bulk:.0f}" if v.ess_bulk is not None else "-"
+        tau = f"{v.tau:.1f}" if v.tau is not None else "-"
+        lines.append(f"{n:<7} {s.map[n]:>9.4f} {v.mean:>9.4f} {v.sd:>9.3g} "
+                     f"[{lo:>8.4f}, {hi:>8.4f}] {v.physical_mean:>11.4g} {v.unit:<4} "
                      f"{rh:>6} {ess:>6} {tau:>6}")
-    noise = s["noise"]["map"]
-    lines.append("noise (MAP): " + ", ".join(f"{k} {v['value']:.3g} {v['unit']}"
-                                              for k, v in noise.items()))
-    for note in s.get("identifiability", {}).get("notes", []):
+    if s.noise is not None:
+        lines.append("noise (MAP): " + ", ".join(f"{k} {v.value:.3g} {v.unit}"
+                                                  for k, v in s.noise.map.items()))
+    for note in (s.identifiability or {}).get("notes", []):
         lines.append(f"warning: {note}")
-    if "adequacy" in s:
-        lines.append(f"adequacy: {s['adequacy']['line']}")
+    if s.adequacy is not None:
+        lines.append(f"adequacy: {s.adequacy.line}")
     return "\n".join(lines)
 
 
-def format_joint(s: dict) -> str:
-    lines = [f"Joint identification of {len(s['recordings'])} recordings ({s['inference']}, "
-             f"{'converged' if s['converged'] else 'NOT converged'}, {s['wall_s']:.1f} s)",
+def format_joint(s: Identification) -> str:
+    """The terminal table of a joint identification of several recordings."""
+    wall = f", {s.wall_s:.1f} s" if s.wall_s is not None else ""
+    lines = [f"Joint identification of {len(s.recordings or [])} recordings ({s.inference}, "
+             f"{'converged' if s.converged else 'NOT converged'}{wall})",
              f"{'param':<9} {'mean':>9} {'sd':>9} {'90% HDI':>21} {'physical mean':>16}"]
-    for n, v in s["parameters"].items():
-        lo, hi = v["hdi90"]
-        lines.append(f"{n:<9} {v['mean']:>9.4f} {v['sd']:>9.3g} [{lo:>8.4f}, {hi:>8.4f}] "
-                     f"{v['physical_mean']:>11.4g} {v['unit']}")
-    for i, r in enumerate(s["records"], 1):
-        noise = ", ".join(f"{k} {v['value']:.3g} {v['unit']}" for k, v in r["noise"].items())
-        lines.append(f"record {i}: {r['recording']}, {r['speed_rpm']:g} rpm, dt {r['dt']:g} s; "
+    for n, v in s.parameters.items():
+        lo, hi = v.hdi90
+        lines.append(f"{n:<9} {v.mean:>9.4f} {v.sd:>9.3g} [{lo:>8.4f}, {hi:>8.4f}] "
+                     f"{v.physical_mean:>11.4g} {v.unit}")
+    for i, r in enumerate(s.records or [], 1):
+        noise = ", ".join(f"{k} {v.value:.3g} {v.unit}" for k, v in r.noise.items())
+        lines.append(f"record {i}: {r.recording}, {r.speed_rpm:g} rpm, dt {r.dt:g} s; "
                      f"noise {noise}")
-    if "agreement" in s and not s["agreement"]["disagree"]:
-        lines.append(f"agreement: {s['agreement']['line']}")
-    lines.append(f"adequacy: {s['adequacy']['line']}")
+    if s.agreement is not None and not s.agreement["disagree"]:
+        lines.append(f"agreement: {s.agreement['line']}")
+    if s.adequacy is not None:
+        lines.append(f"adequacy: {s.adequacy.line}")
     return "\n".join(lines)
 
 
@@ -127,8 +133,8 @@ def _run_joint(args: argparse.Namespace, priors) -> int:
     result = identify_joint(recs, args.params, priors, IdentifyOptions(
         map_only=True, map_method=args.map_method, seed=args.seed), per_record=per)
     result.save(args.out)
-    summary = to_jsonable(result.summary)
-    emit(summary, format_joint(summary) + f"\nwrote {args.out}/summary.json", args.json)
+    emit(to_jsonable(result.to_dict()), format_joint(result)
+         + f"\nwrote {args.out}/summary.json", args.json)
     return 0
 
 
@@ -149,8 +155,7 @@ def run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
     result.save(args.out)
-    summary = to_jsonable(result.summary)
-    text = format_summary(summary) + f"\nwrote {args.out}/summary.json" + \
+    text = format_summary(result) + f"\nwrote {args.out}/summary.json" + \
         ("" if args.map_only else f" and {args.out}/posterior.nc")
-    emit(summary, text, args.json)
+    emit(to_jsonable(result.to_dict()), text, args.json)
     return 0

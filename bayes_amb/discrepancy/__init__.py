@@ -3,7 +3,7 @@ out, model it, and show the fit improve.
 
     from bayes_amb.discrepancy import diagnose
     d = diagnose(load_recording("realistic.csv"), "k_By,c_By")
-    d.report["explanations"]          # the named effects with their physical parameters
+    d.explanations                    # the named effects with their physical parameters
     d.save("runs/diag")               # diagnosis.json, residuals.nc, models/*.nc
 """
 

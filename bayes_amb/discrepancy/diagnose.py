@@ -2,8 +2,10 @@
 
     rec = load_recording("realistic.csv")
     d = diagnose(rec)                  # all eight bearing coefficients fitted
-    d.report["mismatch"]["detected"], [e["effect"] for e in d.report["explanations"]]
+    d.mismatch.detected, [e.effect for e in d.explanations]
     d.save("runs/realistic_diag")      # diagnosis.json, residuals.nc, models/*.nc
+
+The result is a :class:`bayes_amb.results.Diagnosis` (results/diagnosis.py).
 
 Steps: the data are checked and record habits removed (checks.py: controller consistency,
 start at rest, offsets and drift, excitation); the nominal model (by default with all eight
@@ -19,7 +21,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -55,16 +57,15 @@ from bayes_amb.discrepancy.locate import (
 )
 from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.discrepancy.revisit import revisit
-from bayes_amb.discrepancy.select import Selection, SelectOptions, select
+from bayes_amb.discrepancy.select import SelectOptions, select
 from bayes_amb.discrepancy.stand_ins import stand_ins
 from bayes_amb.discrepancy.story import plain_language
 from bayes_amb.discrepancy.unexplained import unexplained_block
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import Prior
 from bayes_amb.inference.sampler import initial_ball, run_emcee
-from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
-from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording, require_excitation
+from bayes_amb.results.diagnosis import FILE, Diagnosis
 from bayes_amb.rig import CHANNELS, node_label
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import parse_param_list
@@ -92,61 +93,30 @@ class DiagnoseOptions:
     planes: tuple[str, str] | None = None
 
 
-@dataclass
-class Diagnosis:
-    """Everything diagnose() found. ``report`` is the content of diagnosis.json."""
-
-    report: dict[str, Any]
-    location: Location
-    selection: Selection
-    eps: np.ndarray = field(repr=False)
-    residual_before: np.ndarray = field(repr=False)
-    residual_after: np.ndarray = field(repr=False)
-    dt: float = 1e-4
-
-    @property
-    def effects(self) -> list[str]:
-        return [e["effect"] for e in self.report["explanations"]]
-
-    def residuals_dataset(self) -> xr.Dataset:
-        """Residuals before/after, their Welch spectra and the location arrays (for plots
-        and the report, which then recompute nothing)."""
-        t = np.arange(self.eps.shape[0]) * self.dt
-        f, p_before = residual_spectrum(self.residual_before, self.dt)
-        _, p_after = residual_spectrum(self.residual_after, self.dt)
-        _, p_eps = residual_spectrum(self.eps, self.dt)
-        loc = self.location
-        return xr.Dataset(
-            {"eps": (("time", "channel"), self.eps),
-             "residual_before": (("time", "channel"), self.residual_before),
-             "residual_after": (("time", "channel"), self.residual_after),
-             "psd_eps": (("freq", "channel"), p_eps),
-             "psd_before": (("freq", "channel"), p_before),
-             "psd_after": (("freq", "channel"), p_after),
-             "band_lo_hz": (("band",), loc.band_lo_hz), "band_hi_hz": (("band",), loc.band_hi_hz),
-             "coherence": (("band", "channel"), loc.coherence),
-             "coherence_p": (("band", "channel"), loc.coherence_p),
-             "floor_ratio": (("band", "channel"), loc.floor_ratio),
-             "whiteness_p": (("channel",), loc.whiteness_p),
-             "xcorr": (("channel", "input", "lag"), loc.xcorr),
-             "autocorr": (("channel", "lag_ac"), loc.autocorr)},
-            coords={"time": t, "channel": list(CHANNELS), "input": list(CHANNELS),
-                    "freq": f},
-            attrs={"xcorr_bound": loc.xcorr_bound, "dt": self.dt})
-
-    def save(self, out_dir: str | Path) -> Path:
-        """Write OUT/diagnosis.json, OUT/residuals.nc and OUT/models/<model>.nc (posterior
-        draws of each fitted model: emcee or Laplace, as their attrs say), atomically."""
-        d = Path(out_dir)
-        (d / "models").mkdir(parents=True, exist_ok=True)
-        write_netcdf_atomic(self.residuals_dataset(), d / "residuals.nc")
-        sel = self.selection
-        for tag, fm in [("nominal", sel.nominal)] + [
-                (f"step{i + 1}_{fm.candidates[-1].effect}", fm)
-                for i, fm in enumerate(sel.accepted)]:
-            write_netcdf_atomic(_posterior_dataset(fm), d / "models" / f"{tag}.nc")
-        write_text_atomic(d / "diagnosis.json", result_json_text(self.report))
-        return d
+def residuals_dataset(loc: Location, eps: np.ndarray, residual_before: np.ndarray,
+                      residual_after: np.ndarray, dt: float) -> xr.Dataset:
+    """Residuals before/after, their Welch spectra and the location arrays: a run folder's
+    residuals.nc (plots and the report then recompute nothing)."""
+    t = np.arange(eps.shape[0]) * dt
+    f, p_before = residual_spectrum(residual_before, dt)
+    _, p_after = residual_spectrum(residual_after, dt)
+    _, p_eps = residual_spectrum(eps, dt)
+    return xr.Dataset(
+        {"eps": (("time", "channel"), eps),
+         "residual_before": (("time", "channel"), residual_before),
+         "residual_after": (("time", "channel"), residual_after),
+         "psd_eps": (("freq", "channel"), p_eps),
+         "psd_before": (("freq", "channel"), p_before),
+         "psd_after": (("freq", "channel"), p_after),
+         "band_lo_hz": (("band",), loc.band_lo_hz), "band_hi_hz": (("band",), loc.band_hi_hz),
+         "coherence": (("band", "channel"), loc.coherence),
+         "coherence_p": (("band", "channel"), loc.coherence_p),
+         "floor_ratio": (("band", "channel"), loc.floor_ratio),
+         "whiteness_p": (("channel",), loc.whiteness_p),
+         "xcorr": (("channel", "input", "lag"), loc.xcorr),
+         "autocorr": (("channel", "lag_ac"), loc.autocorr)},
+        coords={"time": t, "channel": list(CHANNELS), "input": list(CHANNELS), "freq": f},
+        attrs={"xcorr_bound": loc.xcorr_bound, "dt": dt})
 
 
 def improvement_location(nominal: FittedModel, final: FittedModel,
@@ -178,16 +148,6 @@ def improvement_location(nominal: FittedModel, final: FittedModel,
     return {"bands_hz": spans, "channels": chans, "share": share,
             "gain_by_band": [[float(a), float(b), float(g)] for a, b, g in zip(f0, f1, d,
                                                                               strict=True)]}
-
-
-def _posterior_dataset(fm: FittedModel, n: int = 2000) -> xr.Dataset:
-    s = draws(fm, n)
-    kind = "emcee" if fm.samples is not None else "Laplace approximation at the MAP"
-    return xr.Dataset({name: (("draw",), s[:, j]) for j, name in enumerate(fm.names)},
-                      attrs={"inference": kind,
-                             "effects": ",".join(c.key for c in fm.candidates) or "none",
-                             "log_post_map": fm.log_post,
-                             "log_bayes_factor": np.nan if fm.log_bf is None else fm.log_bf})
 
 
 def _sample(fm: FittedModel, steps: int, seed: int) -> None:
@@ -389,9 +349,11 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                       f"accept above log posterior odds {opt.log_bf_threshold:g}"),
         "inference": "emcee" if opt.sample else "MAP with Laplace approximation",
         "seed": opt.seed,
+        "summary": "",
     }
-    report["summary"] = plain_language(report)
-    report["wall_s"] = time.perf_counter() - t0
-    return Diagnosis(report=report, location=loc, selection=sel, eps=eps,
-                     residual_before=before["residual"], residual_after=after["residual"],
-                     dt=recording.dt)
+    d = Diagnosis.from_dict(report, FILE)
+    d = replace(d, story=plain_language(d), wall_s=time.perf_counter() - t0,
+                residuals=residuals_dataset(loc, eps, before["residual"], after["residual"],
+                                            recording.dt),
+                location=loc, selection=sel)
+    return d

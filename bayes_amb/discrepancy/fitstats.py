@@ -10,6 +10,7 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+import xarray as xr
 from numpy.typing import NDArray
 from scipy.signal import welch
 
@@ -177,6 +178,18 @@ def fit_quality(fitted: FittedModel, eps: NDArray) -> dict[str, Any]:
     return {"nrmse": {ch: float(v) for ch, v in zip(CHANNELS, nrmse, strict=True)},
             "whiteness_p": {ch: float(v) for ch, v in zip(CHANNELS, lb, strict=True)},
             "residual": r}
+
+
+def posterior_dataset(fm: FittedModel, n: int = 2000) -> xr.Dataset:
+    """``n`` posterior draws of a fitted model (emcee or Laplace, as its attrs say): a run
+    folder's models/<model>.nc."""
+    s = draws(fm, n)
+    kind = "emcee" if fm.samples is not None else "Laplace approximation at the MAP"
+    return xr.Dataset({name: (("draw",), s[:, j]) for j, name in enumerate(fm.names)},
+                      attrs={"inference": kind,
+                             "effects": ",".join(c.key for c in fm.candidates) or "none",
+                             "log_post_map": fm.log_post,
+                             "log_bayes_factor": np.nan if fm.log_bf is None else fm.log_bf})
 
 
 def residual_spectrum(r: NDArray, dt: float) -> tuple[NDArray, NDArray]:

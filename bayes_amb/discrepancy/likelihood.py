@@ -74,7 +74,15 @@ def scale_shift(n_bins: NDArray) -> NDArray:
 class RobustWhittle(WhittleLikelihood):
     """Whole-band Whittle likelihood of an extended model with the band noise spectra
     integrated out (see module docstring). Called like WhittleLikelihood: parameters
-    (nb, p + q) and log10 sigma (nb, 3)."""
+    (nb, p + q) and log10 sigma (nb, 3).
+
+    Its engine is its model's (``forward.engine``, kernels.Engine): the compiled modal
+    form, residual DFT and band sums as for identify. It does not take the fused path
+    (inference/fused.py), which is written for the observer-form error system of the
+    nominal loop with white-noise band algebra: an extended model's candidates change the
+    loop (delays, lags, bending pairs: ``fast`` is False), the window starts after a
+    pre-history whose state is subtracted, spectral lines enter the residual, and the band
+    algebra here is the noise-marginalised one (nu, shift), not the plug-in Phi."""
 
     def __init__(self, forward: ExtendedForwardModel, eps: NDArray, n_bands: int = 192,
                  prior_weight: float = 1.0, noise_filters: NDArray | None = None,
@@ -109,14 +117,14 @@ class RobustWhittle(WhittleLikelihood):
         mb, xi = self.forward.modal(theta, self.x_w)
         if self.start:
             lam_s = np.where(mb.stable[:, None], mb.lam, 0.0)
-            xi = xi - state_after(lam_s, mb.Bm, self.x_pre)
+            xi = xi - state_after(lam_s, mb.Bm, self.x_pre, self.engine)
         return mb, xi
 
     def prediction_dft(self, P: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of S(theta) x over the window (scaled), and the stability mask, for a batch
         of parameter rows P (nb, p + q); lines not included."""
         mb, xi = self.modal_state(P)
-        if kernels.use_compiled():
+        if self.engine.compiled:
             zero = np.zeros_like(self.E)
             return -kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, zero,
                                          self.scale), mb.stable

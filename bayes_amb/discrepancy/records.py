@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from bayes_amb.discrepancy.diagnose import DiagnoseOptions, Diagnosis, diagnose
+from bayes_amb.discrepancy.diagnose import DiagnoseOptions, diagnose
 from bayes_amb.discrepancy.fitstats import draws, effect_summaries
 from bayes_amb.discrepancy.library import make_candidate
 from bayes_amb.discrepancy.library.registry import NOMINAL_FAMILY
@@ -51,6 +51,7 @@ from bayes_amb.inference.priors import Prior
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording
+from bayes_amb.results.diagnosis import CandidateScore, Diagnosis, Explanation
 
 
 @dataclass
@@ -66,7 +67,7 @@ class RecordsDiagnosis:
     def to_dict(self) -> dict[str, Any]:
         return {"format": "bayes-amb-diagnosis-records/1", "recordings": self.sources,
                 "speeds_rpm": self.speeds_rpm,
-                "verdicts": [d.report["verdict"] for d in self.diagnoses],
+                "verdicts": [d.verdict for d in self.diagnoses],
                 "across": self.across}
 
     def save(self, out_dir: str | Path) -> Path:
@@ -81,26 +82,22 @@ class RecordsDiagnosis:
         return d
 
 
-def _key(e: dict[str, Any]) -> str:
-    return f"{e['effect']}@{e['location']}"
-
-
-def _size_of(e: dict[str, Any], d: Diagnosis) -> dict[str, Any]:
+def _size_of(e: Explanation, d: Diagnosis) -> dict[str, Any]:
     """The physical size of a record's explanation for the agreement across records: its
     parameters, or for an unbalance its two-plane balancing answer (u per correction
     plane, which does not depend on the node the search named; the u at that node does)."""
-    if e["effect"] in NODE_FREE and (d.report.get("balancing") or {}).get("planes"):
-        return {f"u_{pl['plane']}": pl["u_kgm"] for pl in d.report["balancing"]["planes"]}
-    return e["params"]
+    if e.effect in NODE_FREE and d.balancing is not None and d.balancing.planes:
+        return {f"u_{pl.plane}": pl.u_kgm.to_dict() for pl in d.balancing.planes}
+    return {k: v.to_dict() for k, v in e.params.items()}
 
 
-def _named_elsewhere(key: str, d: Diagnosis) -> dict[str, Any] | None:
+def _named_elsewhere(key: str, d: Diagnosis) -> Explanation | None:
     """The explanation of a record that names the effect of ``key`` at another location,
     for an effect in NODE_FREE (else None)."""
     effect = key.split("@")[0]
     if effect not in NODE_FREE:
         return None
-    return next((e for e in d.report["explanations"] if e["effect"] == effect), None)
+    return next((e for e in d.explanations if e.effect == effect), None)
 
 
 JOINT_FITS = 2
@@ -108,7 +105,7 @@ JOINT_FITS = 2
 
 
 def _failed_check(d: Diagnosis) -> bool:
-    return bool(d.report["checks"]) and any(not c["ok"] for c in d.report["checks"])
+    return d.checks_failed
 
 
 def _tested_in(d: Diagnosis, key: str, priors: dict[str, Prior] | None, seed: int,
@@ -128,12 +125,11 @@ def _tested_in(d: Diagnosis, key: str, priors: dict[str, Prior] | None, seed: in
     return c["log_bayes_factor"], size, (c.get("screen_gain") or 0.0) > 0.0
 
 
-def _last_screens(d: Diagnosis) -> list[dict[str, Any]]:
+def _last_screens(d: Diagnosis) -> list[CandidateScore]:
     """The physics screens of the record's round that accepted nothing, which screened
     what its final model still lacks (none when the search stopped at max_effects)."""
     last = len(d.selection.accepted) + 1
-    return [c for c in d.report["candidates"] if c["round"] == last
-            and c["effect"] not in NOMINAL_FAMILY]
+    return [c for c in d.candidates if c.round == last and c.effect not in NOMINAL_FAMILY]
 
 
 def _in_every_record(row: dict[str, Any]) -> bool:
@@ -149,11 +145,10 @@ def _occam_factors(diags: list[Diagnosis]) -> dict[str, float]:
     node scan's refit gains more than its screen; the foreign benchmark's diagnoses)."""
     gaps: dict[str, list[float]] = {}
     for d in diags:
-        for c in d.report["candidates"]:
-            if isinstance(c["round"], int) and c.get("screen_gain") is not None \
-                    and c.get("log_bayes_factor") is not None:
-                gaps.setdefault(c["effect"], []).append(c["screen_gain"]
-                                                        - c["log_bayes_factor"])
+        for c in d.candidates:
+            if isinstance(c.round, int) and c.screen_gain is not None \
+                    and c.log_bayes_factor is not None:
+                gaps.setdefault(c.effect, []).append(c.screen_gain - c.log_bayes_factor)
     return {e: max(float(np.median(v)), 0.0) for e, v in gaps.items()}
 
 
@@ -171,8 +166,7 @@ def joint_search(diags: list[Diagnosis], named: set[str], priors: dict[str, Prio
         screens = _last_screens(diags[i])
         n_pool.append(len(screens))
         for c in screens:
-            gains.setdefault(f"{c['effect']}@{c['location']}", []).append(
-                max(c["screen_gain"] or 0.0, 0.0))
+            gains.setdefault(c.key, []).append(max(c.screen_gain or 0.0, 0.0))
     K = max(n_pool)
     occam = _occam_factors([diags[i] for i in usable])
     named_effects = {k.split("@")[0] for k in named}
@@ -229,9 +223,9 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
     diags = [diagnose(r, params, priors, opt) for r in recordings]
     named: dict[str, list[int]] = {}
     for i, d in enumerate(diags):
-        for e in d.report["explanations"]:
-            if e.get("kind", "physics") == "physics":
-                named.setdefault(_key(e), []).append(i)
+        for e in d.explanations:
+            if e.kind == "physics":
+                named.setdefault(e.key, []).append(i)
     across = []
     for key, where in named.items():
         row: dict[str, Any] = {"effect": key, "named_in": [i + 1 for i in where],
@@ -239,13 +233,13 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         sizes: dict[str, dict[str, Any]] = {}
         for i, d in enumerate(diags):
             if i in where:
-                e = next(e for e in d.report["explanations"] if _key(e) == key)
-                lbf = e["score"]
+                e = next(e for e in d.explanations if e.key == key)
+                lbf = e.score
                 sizes[str(i + 1)] = _size_of(e, d)
             elif _failed_check(d):
                 lbf = None                              # a failed data check: not tested
             elif (same := _named_elsewhere(key, d)) is not None:
-                lbf = same["score"]                     # the same physics at another place
+                lbf = same.score                        # the same physics at another place
                 sizes[str(i + 1)] = _size_of(same, d)
             else:
                 lbf, size, gain = _tested_in(d, key, priors, opt.seed)

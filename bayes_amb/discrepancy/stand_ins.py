@@ -16,9 +16,12 @@ interval merely reaching past it is not enough: the data must put the effect out
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bayes_amb.discrepancy.library.registry import REGISTRY
+
+if TYPE_CHECKING:
+    from bayes_amb.results.diagnosis import StandIn
 
 
 def stand_ins(effects: list[dict[str, Any]]) -> list[dict[str, Any]]:
@@ -47,10 +50,10 @@ def stand_ins(effects: list[dict[str, Any]]) -> list[dict[str, Any]]:
     return out
 
 
-def stand_in_sentence(found: list[dict[str, Any]]) -> str:
+def stand_in_sentence(found: list[StandIn]) -> str:
     """The plain-language sentence on stand-ins ('' without any)."""
     if not found:
         return ""
-    return (" ".join(f"Stand-in: {s['line']}." for s in found) + " The data accept the "
+    return (" ".join(f"Stand-in: {s.line}." for s in found) + " The data accept the "
             "named model, but not as the physics its names claim: those effects stand in "
             "for physics the library lacks, so the naming is tentative.")

@@ -3,10 +3,13 @@ added, how much better the fit is."""
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING
 
 from bayes_amb.discrepancy.library.registry import REGISTRY
 from bayes_amb.discrepancy.stand_ins import stand_in_sentence
+
+if TYPE_CHECKING:
+    from bayes_amb.results.diagnosis import CandidateScore, Diagnosis, Finding, Mismatch
 
 
 def _library_titles() -> str:
@@ -19,7 +22,7 @@ def _bands(bands: list[list[float]]) -> str:
     return ", ".join(parts) + more + " Hz"
 
 
-def _tests(findings: list[dict[str, Any]]) -> str:
+def _tests(findings: list[Finding]) -> str:
     names = {"coherence": "residual coherent with the excitation",
              "floor": "residual power above the fitted noise floor",
              "line": "a spectral line", "whiteness": "non-white residual",
@@ -27,18 +30,18 @@ def _tests(findings: list[dict[str, Any]]) -> str:
              "windows": "residual statistics changing over time"}
     seen = []
     for f in findings:
-        if f["test"] not in seen:
-            seen.append(f["test"])
+        if f.test not in seen:
+            seen.append(f.test)
     return ", ".join(names[t] for t in seen)
 
 
-def _unexplained(report: dict[str, Any]) -> str:
-    un = report.get("unexplained") or {}
-    if not un.get("present"):
+def _unexplained(d: Diagnosis) -> str:
+    un = d.unexplained
+    if not un.present:
         return ""
-    where = f"on channel(s) {', '.join(un['channels'])}" + (
-        f", in {_bands(un['bands_hz'])}" if un["bands_hz"] else "")
-    expl = report["explanations"]
+    where = f"on channel(s) {', '.join(un.channels)}" + (
+        f", in {_bands(un.bands_hz)}" if un.bands_hz else "")
+    expl = d.explanations
     tail = (" The effects named above fit part of it and are therefore only tentative."
             if expl else "")
     return (f"Unexplained: the best model still leaves structure coherent with the excitation "
@@ -47,13 +50,13 @@ def _unexplained(report: dict[str, Any]) -> str:
             + tail)
 
 
-def _noise(mm: dict[str, Any]) -> str:
+def _noise(mm: Mismatch) -> str:
     """A sentence on the noise findings (floor, whiteness): a habit, not a mismatch."""
-    nf = mm.get("noise_findings") or []
+    nf = mm.noise_findings
     if not nf:
         return ""
-    floor = [f["band_hz"] for f in nf if f["test"] == "floor"]
-    white = sorted({c for f in nf if f["test"] == "whiteness" for c in f["channels"]})
+    floor = [f.band_hz for f in nf if f.test == "floor"]
+    white = sorted({c for f in nf if f.test == "whiteness" for c in f.channels or []})
     parts = ([f"residual power above the loop noise model in {_bands(floor)}"] if floor
              else []) + ([f"non-white residual on {', '.join(white)}"] if white else [])
     return ("The noise is not as the loop noise model has it (" + "; ".join(parts) + "): "
@@ -62,92 +65,90 @@ def _noise(mm: dict[str, Any]) -> str:
             "counted as a mismatch.")
 
 
-def _swaps(cands: list[dict[str, Any]]) -> str:
+def _swaps(cands: list[CandidateScore]) -> str:
     """A sentence on the choices the revisit step (revisit.py) replaced, if any."""
-    named = {}
+    named: dict[str, CandidateScore] = {}
     for c in cands:
-        if c.get("round") == "revisit" and c.get("log_bayes_factor") is not None \
-                and c.get("chosen_log_bayes_factor") is not None \
-                and c["log_bayes_factor"] > c["chosen_log_bayes_factor"]:
-            old = named.get(c["instead_of"])
-            if old is None or c["log_bayes_factor"] > old["log_bayes_factor"]:
-                named[c["instead_of"]] = c
+        if c.round == "revisit" and c.log_bayes_factor is not None \
+                and c.chosen_log_bayes_factor is not None \
+                and c.log_bayes_factor > c.chosen_log_bayes_factor:
+            old = named.get(c.instead_of)
+            if old is None or c.log_bayes_factor > old.log_bayes_factor:
+                named[c.instead_of] = c
     if not named:
         return ""
     return "Once the later effects were in the model, " + "; ".join(
-        f"{c['effect']}@{c['location']} explained the data better than {k}, chosen first "
-        f"(log Bayes factor {c['log_bayes_factor']:.1f} against {c['chosen_log_bayes_factor']:.1f}"
+        f"{c.key} explained the data better than {k}, chosen first "
+        f"(log Bayes factor {c.log_bayes_factor:.1f} against {c.chosen_log_bayes_factor:.1f}"
         " with the others held in the model), and replaced it" for k, c in named.items()) + "."
 
 
-def plain_language(report: dict[str, Any]) -> str:
-    """One paragraph from the numbers of a diagnosis.json report."""
-    mm = report["mismatch"]
-    expl = report["explanations"]
-    checks = report.get("checks", [])
-    failed = [c["line"] for c in checks if not c["ok"]]
+def plain_language(d: Diagnosis) -> str:
+    """One paragraph from the numbers of a diagnosis."""
+    mm = d.mismatch
+    expl = d.explanations
+    checks = d.checks
+    failed = [c.line for c in checks if not c.ok]
     if failed:
         return ("The data failed a check, so no physics is named: " + "; ".join(failed)
                 + ".")
-    habits = [c["line"] for c in checks if c["check"] in ("offsets", "start")
-              and ("removed" in c["line"] or "mid-operation" in c["line"])]
+    habits = [c.line for c in checks if c.check in ("offsets", "start")
+              and ("removed" in c.line or "mid-operation" in c.line)]
     prefix = ("Record habits handled as nuisance, not physics: " + "; ".join(habits) + ". "
               if habits else "")
-    unexpl = _unexplained(report)
+    unexpl = _unexplained(d)
     noise = _noise(mm)
-    if not mm["detected"] and not expl:
+    if not mm.detected and not expl:
         return prefix + ("No mismatch: the residual of the nominal model holds no structure "
                 "physics could leave (no excitation-coherent band, no line at 1x, no "
                 "cross-correlation with the excitation, no change over time, at a family-wise "
-                f"{100 * mm['evidence']['alpha']:g} % level), and no candidate physics "
+                f"{100 * mm.evidence.alpha:g} % level), and no candidate physics "
                 "improves the fit enough to be named." + (" " + noise if noise else ""))
-    where = (f"on channel(s) {', '.join(mm['channels'])}"
-             + (f", in {_bands(mm['bands_hz'])}" if mm["bands_hz"] else "")
-             + (f", between {mm['time_s'][0]:.2f} and {mm['time_s'][1]:.2f} s"
-                if mm["time_s"] else ""))
+    where = (f"on channel(s) {', '.join(mm.channels)}"
+             + (f", in {_bands(mm.bands_hz)}" if mm.bands_hz else "")
+             + (f", between {mm.time_s[0]:.2f} and {mm.time_s[1]:.2f} s"
+                if mm.time_s else ""))
     text = [prefix.strip()] if prefix else []
-    if mm["detected"]:
+    if mm.detected:
         text.append(f"The nominal model does not explain this recording: "
-                    f"{_tests(mm['findings'])} {where} (evidence "
-                    f"{mm['evidence']['strength']}, smallest adjusted p = "
-                    f"{mm['evidence']['p_adjusted_min']:.1e}).")
+                    f"{_tests(mm.findings)} {where} (evidence "
+                    f"{mm.evidence.strength}, smallest adjusted p = "
+                    f"{mm.evidence.p_adjusted_min:.1e}).")
     else:
         text.append("The location tests found nothing significant at their family-wise level,"
                     " but a candidate model still fits clearly better.")
     if expl:
-        what = "; ".join(f"{e['description']} (90 % HDI of "
-                         + ", ".join(f"{k} [{v['hdi90'][0]:.3g}, {v['hdi90'][1]:.3g}] {v['unit']}"
-                                     for k, v in e["params"].items())
-                         + f"; log Bayes factor {e['score']:.1f})" for e in expl)
+        what = "; ".join(f"{e.description} (90 % HDI of "
+                         + ", ".join(f"{k} [{v.hdi90[0]:.3g}, {v.hdi90[1]:.3g}] {v.unit}"
+                                     for k, v in e.params.items())
+                         + f"; log Bayes factor {e.score:.1f})" for e in expl)
         text.append(f"Added to the model: {what}.")
-        direct = report.get("direct_terms") or []
+        direct = d.direct_terms
         if direct:
             text.append("Beside it, the direct stiffness and damping " + "; ".join(
-                f"at {d['location']} (K [{d['params']['K']['hdi90'][0]:.3g}, "
-                f"{d['params']['K']['hdi90'][1]:.3g}] N/m, C "
-                f"[{d['params']['C']['hdi90'][0]:.3g}, {d['params']['C']['hdi90'][1]:.3g}] "
-                "N s/m)" for d in direct) + " were fitted, as a seal or impeller has them, "
+                f"at {t.location} (K [{t.params['K'].hdi90[0]:.3g}, "
+                f"{t.params['K'].hdi90[1]:.3g}] N/m, C "
+                f"[{t.params['C'].hdi90[0]:.3g}, {t.params['C'].hdi90[1]:.3g}] "
+                "N s/m)" for t in direct) + " were fitted, as a seal or impeller has them, "
                 "so that the bearing coefficients do not take them.")
-        if report.get("parameters_after_from", "").endswith("tentative"):
+        if d.parameters_after_from.endswith("tentative"):
             text.append("The coefficients after are averaged with the nominal model's, since "
                         "the naming is tentative.")
-        swaps = _swaps(report.get("candidates", []))
+        swaps = _swaps(d.candidates)
         if swaps:
             text.append(swaps)
-        fb, fa = report["fit"]["before"], report["fit"]["after"]
-        chans = list(fb["nrmse"])
-        nr = ", ".join(f"{c} {fb['nrmse'][c]:.3f} -> {fa['nrmse'][c]:.3f}" for c in chans)
-        wp = min(fa["whiteness_p"].values())
-        text.append(f"The log-likelihood rises by {report['fit']['log_likelihood_gain']:.0f}; "
+        fb, fa = d.fit.before, d.fit.after
+        nr = ", ".join(f"{c} {fb.nrmse[c]:.3f} -> {fa.nrmse[c]:.3f}" for c in fb.nrmse)
+        wp = min(fa.whiteness_p.values())
+        text.append(f"The log-likelihood rises by {d.fit.log_likelihood_gain:.0f}; "
                     f"NRMSE per channel {nr}; smallest whiteness p-value after: {wp:.2g}.")
-        pb, pa = report["parameters_before"], report["parameters_after"]
-        moved = [f"{n} {pb[n]['mean']:+.3f} -> {pa[n]['mean']:+.3f}" for n in pb
-                 if abs(pa[n]["mean"] - pb[n]["mean"]) > pb[n]["sd"]]
+        pb, pa = d.parameters_before, d.parameters_after
+        moved = [f"{n} {pb[n].mean:+.3f} -> {pa[n].mean:+.3f}" for n in pb
+                 if abs(pa[n].mean - pb[n].mean) > pb[n].sd]
         if moved:
             text.append("Estimates that moved by more than their sd once the physics was "
                         f"added: {', '.join(moved)}.")
-        bound = [n for n in pb if pb[n].get("at_prior_bound") and not
-                 pa[n].get("at_prior_bound")]
+        bound = [n for n in pb if pb[n].at_prior_bound and not pa[n].at_prior_bound]
         if bound:
             text.append(f"With the nominal model {', '.join(bound)} sat on its prior bound, "
                         "absorbing the missing physics; with it added it no longer does.")
@@ -155,7 +156,7 @@ def plain_language(report: dict[str, Any]) -> str:
         text.append(f"None of the candidate physics ({_library_titles()}) explains it.")
     if unexpl:
         text.append(unexpl)
-    subst = stand_in_sentence(report.get("stand_ins") or [])
+    subst = stand_in_sentence(d.stand_ins)
     if subst:
         text.append(subst)
     if noise:

@@ -31,6 +31,8 @@ from bayes_amb.engineering.intervals import CentralRegion, central_region, inter
 from bayes_amb.engineering.loop import MODE_LABELS, closed_loop_modes, log_decrement
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import Recording
+from bayes_amb.results.engineering import EngineeringAnswers
+from bayes_amb.results.identification import Identification
 from bayes_amb.rig import CHANNELS
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec, parse_param_list
@@ -78,24 +80,24 @@ def draws_from(source: Any, n_draws: int = 200, seed: int = 0) -> Draws:
     names = tuple(getattr(source, "names", ()))
     flat = None
     samples = getattr(source, "samples", None)
-    if samples is not None:                                  # IdentificationResult
+    if samples is not None:                                  # an Identification
         flat = np.asarray(samples)[:, :, :len(names)].reshape(-1, len(names))
     elif getattr(source, "posterior", None) is not None and hasattr(source, "draws"):
         flat = np.stack([np.asarray(source.draws(n)).ravel() for n in names], axis=1)
     if flat is not None:
         idx = np.linspace(0, flat.shape[0] - 1, min(n_draws, flat.shape[0])).round()
         return Draws(names, flat[idx.astype(int)])
-    summary = getattr(source, "summary", None)
-    if not names or not isinstance(summary, dict):
+    ident = getattr(source, "summary", None) if hasattr(source, "run_dir") else source
+    if not names or not isinstance(ident, Identification):
         raise BayesAmbError(f"draws: cannot take posterior draws from {type(source).__name__}")
-    par = summary["parameters"]
-    mean = np.array([float(par[n]["mean"]) for n in names])
-    sd = np.array([float(par[n].get("sd") or 0.0) for n in names])
+    par = ident.parameters
+    mean = np.array([float(par[n].mean) for n in names])
+    sd = np.array([float(par[n].sd or 0.0) for n in names])
     sd = np.where(np.isfinite(sd), sd, 0.0)
     rng = np.random.default_rng(seed)
-    lc = summary.get("laplace_cov")
-    if isinstance(lc, dict) and tuple(lc.get("names", ())) == names:
-        cov = np.asarray(lc["theta"], dtype=float)
+    lc = ident.laplace_cov
+    if lc is not None and tuple(lc.names) == names:
+        cov = np.asarray(lc.theta, dtype=float)
         return Draws(names, rng.multivariate_normal(mean, cov, size=n_draws,
                                                     method="eigh"))
     return Draws(names, mean + sd * rng.standard_normal((n_draws, len(names))))
@@ -188,6 +190,14 @@ class EngineeringResult:
                 "quantities": {k: q.to_dict() for k, q in self.quantities.items()},
                 "notes": list(self.notes)}
 
+    def answers(self, source: str | None = None) -> EngineeringAnswers:
+        """The typed answers (results/engineering.py: what answers.json holds), with the
+        posterior they came from."""
+        data = self.to_dict()
+        if source is not None:
+            data["source"] = source
+        return EngineeringAnswers.from_dict(data)
+
 
 INTERVAL_TEXT = ("90 %: the 5 % and 95 % quantiles over the posterior draws, widened to the "
                  "quantity's range over the central region within 1.645 sd (Mahalanobis) "
@@ -274,7 +284,7 @@ def physical_quantities(source: Any, recording: Recording,
 
     Parameters
     ----------
-    source : IdentificationResult, RunData or Draws
+    source : Identification, RunData or Draws
         Where the posterior draws come from (see :func:`draws_from`).
     recording : Recording
         Gives the rig, the controller that ran and the running speed.

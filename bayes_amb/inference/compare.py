@@ -22,13 +22,17 @@ and needs more precise records to answer.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.results.diagnosis import FORMAT as DIAGNOSIS
+from bayes_amb.results.diagnosis import Coefficient, Diagnosis
+from bayes_amb.results.files import read_result
+from bayes_amb.results.identification import FORMAT as IDENTIFICATION
+from bayes_amb.results.identification import Identification, Posterior
 
 CHANGE_SCALE = 0.1
 """Default size of a change that matters, in the parameters' own units (0.1: 10 % of ks
@@ -86,10 +90,10 @@ def _log_normal0(x: float, var: float) -> float:
     return -0.5 * (math.log(2 * math.pi * var) + x * x / var)
 
 
-def change(name: str, before: dict[str, Any], after: dict[str, Any],
+def change(name: str, before: Posterior | Coefficient, after: Posterior | Coefficient,
            change_scale: float = CHANGE_SCALE) -> Change:
-    """The change of one parameter from its two summaries ({mean, sd, ...}; module doc)."""
-    mb, sb, ma, sa = before["mean"], before["sd"], after["mean"], after["sd"]
+    """The change of one parameter from its two posteriors (mean, sd; module doc)."""
+    mb, sb, ma, sa = before.mean, before.sd, after.mean, after.sd
     if not all(math.isfinite(v) for v in (mb, sb, ma, sa)) or sb <= 0 or sa <= 0:
         raise BayesAmbError(f"compare: parameter {name} has no finite positive sd in both "
                             f"runs (before sd {sb}, after sd {sa})")
@@ -100,30 +104,25 @@ def change(name: str, before: dict[str, Any], after: dict[str, Any],
     sd = math.sqrt(var)
     log_bf = _log_normal0(d, var + change_scale ** 2) - _log_normal0(d, var)
     p = 1.0 / (1.0 + math.exp(-log_bf)) if log_bf > -700 else 0.0
-    scale = (after.get("physical_sd", float("nan")) / sa) if "physical_sd" in after else None
-    phys = None if scale is None or not math.isfinite(scale) else scale
+    psd = getattr(after, "physical_sd", None)          # (a diagnosis' coefficients: none)
+    phys = None if psd is None or not math.isfinite(psd / sa) else psd / sa
     return Change(name=name, before=(mb, sb), after=(ma, sa), change=d, sd=sd,
                   hdi90=(d - Z90 * sd, d + Z90 * sd),
                   physical_change=None if phys is None else d * phys,
                   physical_hdi90=None if phys is None else ((d - Z90 * sd) * phys,
                                                             (d + Z90 * sd) * phys),
-                  unit=after.get("unit", "-"), change_scale=change_scale,
+                  unit=after.unit, change_scale=change_scale,
                   log_bayes_factor=log_bf, p_changed=p)
 
 
-def parameters_of(run: dict[str, Any], source: str) -> dict[str, dict[str, Any]]:
-    """The parameter block of an identify summary ('parameters') or a diagnosis
-    ('parameters_after')."""
-    for key in ("parameters", "parameters_after"):
-        if isinstance(run.get(key), dict):
-            return run[key]
-    raise BayesAmbError(f"{source}: neither 'parameters' (summary.json of identify) nor "
-                        "'parameters_after' (diagnosis.json) found")
+def parameters_of(run: Identification | Diagnosis) -> dict[str, Posterior | Coefficient]:
+    """The parameters of an identification, or a diagnosis' coefficients after it."""
+    return run.parameters if isinstance(run, Identification) else run.parameters_after
 
 
-def read_run(path: str | Path) -> tuple[dict[str, Any], str]:
-    """A run's summary: a run directory (its summary.json, else diagnosis.json) or the
-    JSON file itself."""
+def read_run(path: str | Path) -> tuple[Identification | Diagnosis, str]:
+    """A run: a run directory (its summary.json, else diagnosis.json) or the JSON file
+    itself, as its typed result."""
     p = Path(path)
     if p.is_dir():
         for name in ("summary.json", "diagnosis.json"):
@@ -132,20 +131,20 @@ def read_run(path: str | Path) -> tuple[dict[str, Any], str]:
                 break
         else:
             raise BayesAmbError(f"{path}: no summary.json or diagnosis.json in this directory")
-    try:
-        return json.loads(p.read_text()), str(p)
-    except FileNotFoundError:
-        raise BayesAmbError(f"{p}: no such file") from None
-    except json.JSONDecodeError as exc:
-        raise BayesAmbError(f"{p}: not JSON ({exc.msg} at line {exc.lineno})") from None
+    data = read_result(p)
+    kind = {IDENTIFICATION: Identification, DIAGNOSIS: Diagnosis}.get(data.get("format"))
+    if kind is None:
+        raise BayesAmbError(f"{p}: field format: expected {IDENTIFICATION!r} or "
+                            f"{DIAGNOSIS!r}, got {data.get('format')!r}")
+    return kind.from_dict(data, str(p)), str(p)
 
 
-def compare(before: dict[str, Any], after: dict[str, Any],
+def compare(before: Identification | Diagnosis, after: Identification | Diagnosis,
             change_scale: float | dict[str, float] = CHANGE_SCALE,
             sources: tuple[str, str] = ("before", "after")) -> Comparison:
     """The change of every parameter both runs estimated (module doc). ``change_scale``:
     one tau for all, or per parameter (missing ones take CHANGE_SCALE)."""
-    pb, pa = parameters_of(before, sources[0]), parameters_of(after, sources[1])
+    pb, pa = parameters_of(before), parameters_of(after)
     common = [n for n in pa if n in pb]
     if not common:
         raise BayesAmbError(f"compare: {sources[0]} and {sources[1]} share no parameter "

@@ -37,6 +37,9 @@ from bayes_amb.uncertainty import UncertainPlant, lft_reduced, parse_param_list
 
 _TRANSIENT_TOL = 1e-13
 
+DEFAULT_ENGINE = kernels.Engine()
+"""The compiled engine, for callers outside a model (a model carries its own)."""
+
 
 def state_transform(A: NDArray, B: NDArray, C: NDArray, Ad: NDArray, Bd: NDArray,
                     Cd: NDArray, tol: float = 1e-7) -> NDArray | None:
@@ -86,17 +89,17 @@ class ModalBatch:
     stable: NDArray
 
 
-def diagonalise(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None = None
-                ) -> tuple[ModalBatch, NDArray | None]:
+def diagonalise(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None = None,
+                engine: kernels.Engine = DEFAULT_ENGINE) -> tuple[ModalBatch, NDArray | None]:
     """Eigen-decompose a stack of systems; unstable or non-finite members are flagged.
 
     With an input record x, also returns the modal state after its last sample (nb, ns).
     The default path is compiled (bayes_amb.inference.eigen; members it cannot take go to
-    ``np.linalg.eig``); with ``BAYES_AMB_KERNEL`` "lapack" or "numpy" every member goes to
+    ``np.linalg.eig``); with the engine "lapack" or "numpy" every member goes to
     ``np.linalg.eig`` and the modal state to :func:`final_modal_state`.
     """
     finite = np.all(np.isfinite(A), axis=(1, 2))
-    if kernels.compiled_modal():
+    if engine.compiled_modal:
         lam, Bm, Cm, ok = modal_batch(A, B, C)
         redo = np.flatnonzero(finite & ~ok)
         if redo.size:
@@ -113,11 +116,12 @@ def diagonalise(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None = None
     return _diagonalise_lapack(A, B, C, x)
 
 
-def state_after(lam: NDArray, Bm: NDArray, x: NDArray) -> NDArray:
+def state_after(lam: NDArray, Bm: NDArray, x: NDArray,
+                engine: kernels.Engine = DEFAULT_ENGINE) -> NDArray:
     """Modal state after the record x from rest, (nb, ns): the compiled
     :func:`bayes_amb.inference.eigen.final_state` (each eigenvalue's own number of terms),
-    or :func:`final_modal_state` with ``BAYES_AMB_KERNEL`` "lapack" or "numpy"."""
-    if kernels.compiled_modal():
+    or :func:`final_modal_state` with the engine "lapack" or "numpy"."""
+    if engine.compiled_modal:
         return final_state(lam, Bm, x, _TRANSIENT_TOL)
     return final_modal_state(lam, Bm, x)
 
@@ -167,6 +171,7 @@ class ForwardModel:
     def __init__(self, recording: Recording, params: str | tuple[str, ...]):
         self.params = parse_param_list(params)
         self.recording = recording
+        self.engine = kernels.engine_from_env()     # the likelihood path, chosen once
         rig, dt = recording.rig, recording.dt
         groups = list(recording.excitation)
         if len(groups) != 1:
@@ -217,7 +222,7 @@ class ForwardModel:
         th = np.atleast_2d(np.asarray(theta, dtype=float))
         pl = self.plant
         diag = np.repeat(th, pl.blocks, axis=1)                      # (nb, r)
-        if kernels.compiled_modal():
+        if self.engine.compiled_modal:
             return zoh_compiled(pl.A[None] + (pl.B_w * diag[:, None, :]) @ pl.C_z, pl.B,
                                 self.dt)
         A = pl.A[None] + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
@@ -227,7 +232,7 @@ class ForwardModel:
         """(A, B, C) of the map x -> eps for a batch of theta."""
         Ap, Bp = self.plants(theta)
         if self.fast:
-            if kernels.compiled_modal():
+            if self.engine.compiled_modal:
                 A_S, B_S, C_S = error_form_compiled(*self._error_parts, Ap, Bp, self._LC)
             else:
                 Ad, Bd, C = self.nominal
@@ -246,7 +251,8 @@ class ForwardModel:
               ) -> tuple[ModalBatch, NDArray | None]:
         """Modal form of x -> eps for a batch, and the modal state after the record x
         (default: the recording's excitation)."""
-        return diagonalise(*self.excitation_system(theta), self.x if x is None else x)
+        return diagonalise(*self.excitation_system(theta), self.x if x is None else x,
+                           self.engine)
 
     # ------------------------------------------------------------- predictions
     def simulate(self, theta: NDArray) -> NDArray:

@@ -2,8 +2,10 @@
 
     rec = load_recording("paper.csv")
     result = identify(rec, "k_By")
-    result.summary["parameters"]["k_By"]["mean"]
+    result.parameters["k_By"].mean
     result.save("runs/paper")          # posterior.nc and summary.json
+
+The result is a :class:`bayes_amb.results.Identification` (results/identification.py).
 """
 
 from __future__ import annotations
@@ -11,12 +13,11 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-import xarray as xr
 
 from bayes_amb import __version__
 from bayes_amb.discrepancy.adequacy import assess_fit
@@ -29,16 +30,14 @@ from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.posterior import (
     identifiability,
     pointwise_log_likelihood,
-    save_datatree,
     summarise,
     to_datatree,
 )
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.inference.sampler import initial_ball, run_emcee
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
-from bayes_amb.io.atomic import write_text_atomic
-from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording, require_excitation
+from bayes_amb.results.identification import FILE, Identification
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
@@ -68,32 +67,6 @@ mixed with independence proposals from the Laplace approximation at the MAP, the
     noise_model: str = "loop"
     moves: str = "laplace"
     adequacy: bool = True
-
-
-@dataclass
-class IdentificationResult:
-    """Everything identify() found. ``summary`` is the content of summary.json."""
-
-    names: tuple[str, ...]
-    map: MapResult
-    summary: dict[str, Any]
-    posterior: xr.DataTree | None = None
-    samples: np.ndarray | None = field(default=None, repr=False)
-    eps: np.ndarray | None = field(default=None, repr=False)
-    likelihood: WhittleLikelihood | None = field(default=None, repr=False)
-
-    @property
-    def converged(self) -> bool:
-        return bool(self.summary["converged"])
-
-    def save(self, run_dir: str | Path) -> Path:
-        """Write RUN_DIR/summary.json (and posterior.nc after sampling), atomically."""
-        d = Path(run_dir)
-        d.mkdir(parents=True, exist_ok=True)
-        if self.posterior is not None:
-            save_datatree(self.posterior, d / "posterior.nc")
-        write_text_atomic(d / "summary.json", result_json_text(self.summary))
-        return d
 
 
 def _absolute(source: str) -> str:
@@ -150,7 +123,7 @@ def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | Non
 @limited_threads
 def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
              priors: dict[str, Prior] | None = None,
-             options: IdentifyOptions | None = None) -> IdentificationResult:
+             options: IdentifyOptions | None = None) -> Identification:
     """MAP and emcee posterior of the named parameters from one recording.
 
     The recording's ``truth`` (if simulated) is never read here.
@@ -199,7 +172,6 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         summary["adequacy"] = verdict.to_dict()
         if verdict.adequate and not (opt.map_only and cov is None):
             nominal = None
-    result = IdentificationResult(names=names, map=m, summary=summary, eps=eps, likelihood=like)
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"
         summary["parameters"] = _laplace_summary(names, m, cov, recording.rig)
@@ -210,7 +182,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         summary["converged"] = bool(m.success and cov is not None)
         _with_model_error(summary, nominal, opt.seed)
         summary["wall_s"] = time.perf_counter() - t0
-        return result
+        return _result(summary, names, m, eps, like)
     rng = np.random.default_rng(opt.seed)
     ndim = post.ndim
     n_walkers = opt.walkers or max(24, 2 * ndim + 2)
@@ -259,6 +231,11 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         and run.n_tau >= 50)
     _with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
-    result.posterior = dt
-    result.samples = run.samples
-    return result
+    return _result(summary, names, m, eps, like, posterior=dt, samples=run.samples)
+
+
+def _result(summary: dict[str, Any], names: tuple[str, ...], m: MapResult, eps: np.ndarray,
+            like: WhittleLikelihood, **more: Any) -> Identification:
+    """The typed result of the summary built above, with what the run keeps beside it."""
+    return replace(Identification.from_dict(summary, FILE), names=names, map_result=m,
+                   eps=eps, likelihood=like, **more)

@@ -40,13 +40,13 @@ from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.identify import (
-    IdentificationResult,
     IdentifyOptions,
     _laplace_summary,
     identify,
 )
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.io.recording import Recording
+from bayes_amb.results.identification import FILE, Identification, RecordFit
 from bayes_amb.uncertainty import parse_param_list
 
 STEP = 1e-4
@@ -72,10 +72,10 @@ def _layout(names: tuple[str, ...], per_record: tuple[str, ...], n_rec: int
 def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | list[str],
                    priors: dict[str, Prior] | None = None,
                    options: IdentifyOptions | None = None,
-                   per_record: tuple[str, ...] | list[str] = ()) -> IdentificationResult:
+                   per_record: tuple[str, ...] | list[str] = ()) -> Identification:
     """One posterior of ``params`` from several recordings (module docstring): MAP and
     Laplace approximation; ``per_record`` names parameters estimated separately for each
-    record. ``summary['records']`` holds each record's own fit (MAP, noise, adequacy)."""
+    record. ``records`` holds each record's own fit (MAP, noise, adequacy)."""
     opt = options or IdentifyOptions()
     t0 = time.perf_counter()
     if len(recordings) < 2:
@@ -98,7 +98,7 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
     prior_set = PriorSet(tuple(joint_names),
                          tuple(prior_of[n.split("@")[0]] for n in joint_names))
     likes = [res.likelihood for res in own]
-    sigmas = [res.map.log10_sigma for res in own]
+    sigmas = [res.map_result.log10_sigma for res in own]
 
     def neg(z: NDArray) -> float:
         lp = float(prior_set.log_prior(z[None], np.zeros((1, 3)) + _NOISE_MID)[0])
@@ -125,7 +125,7 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
     z = res.x
     cov = _hessian_covariance(neg, z, bounds)
     rig = recordings[0].rig
-    m = replace(own[0].map, theta=z, log_post=-float(res.fun))
+    m = replace(own[0].map_result, theta=z, log_post=-float(res.fun))
     summary: dict[str, Any] = {
         "format": "bayes-amb-summary/1", "package_version": __version__,
         "recordings": [str(r.source) for r in recordings],
@@ -139,8 +139,8 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         "converged": bool(res.success and cov is not None),
         "seed": opt.seed,
     }
-    inadequate = [i for i, o in enumerate(own)
-                  if not o.summary.get("adequacy", {}).get("adequate", True)]
+    inadequate = [i for i, o in enumerate(own) if o.adequacy is not None
+                  and not o.adequacy.adequate]
     summary["adequacy"] = _joint_adequacy(own, inadequate)
     if inadequate:
         _product_of_reported(summary, own, names, joint_names, idx, prior_set, rig)
@@ -149,7 +149,8 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         summary["inference_note"] = ("the joint posterior is the Laplace approximation; "
                                      "emcee is run per record (identify REC.csv)")
     summary["wall_s"] = time.perf_counter() - t0
-    return IdentificationResult(names=tuple(joint_names), map=m, summary=summary)
+    return replace(Identification.from_dict(summary, FILE), names=tuple(joint_names),
+                   map_result=m)
 
 
 _NOISE_MID = np.array([-7.0, -7.0, -3.0])
@@ -157,7 +158,7 @@ _NOISE_MID = np.array([-7.0, -7.0, -3.0])
 so only theta's prior counts (the noise prior's constant is the same everywhere)."""
 
 
-def _combined_start(own: list[IdentificationResult], names: tuple[str, ...],
+def _combined_start(own: list[Identification], names: tuple[str, ...],
                     joint_names: list[str], idx: list[NDArray]) -> NDArray:
     """Shared parameters: the precision-weighted mean of the records' MAPs; per-record
     ones: the record's own MAP."""
@@ -165,9 +166,9 @@ def _combined_start(own: list[IdentificationResult], names: tuple[str, ...],
     w = np.zeros(len(joint_names))
     for res, ix in zip(own, idx, strict=True):
         for j, n in enumerate(names):
-            sd = res.summary["parameters"][n]["sd"]
+            sd = res.parameters[n].sd
             prec = 1.0 / sd ** 2 if np.isfinite(sd) and sd > 0 else 1e-6
-            z[ix[j]] += prec * res.map.theta[j]
+            z[ix[j]] += prec * res.map_result.theta[j]
             w[ix[j]] += prec
     return z / np.where(w > 0, w, 1.0)
 
@@ -213,37 +214,35 @@ def _summary(joint_names: list[str], m: Any, cov: NDArray | None, rig: Any
     return out
 
 
-def _record_block(rec: Recording, res: IdentificationResult) -> dict[str, Any]:
-    s = res.summary
-    return {"recording": str(rec.source), "speed_rpm": rec.speed_rpm, "dt": rec.dt,
-            "excitation_port": s.get("excitation_port"), "map": s["map"],
-            "noise": s["noise"]["map"], "adequacy": s.get("adequacy"),
-            "parameters": s["parameters"]}
+def _record_block(rec: Recording, res: Identification) -> RecordFit:
+    return RecordFit(recording=str(rec.source), speed_rpm=rec.speed_rpm, dt=rec.dt,
+                     excitation_port=res.excitation_port, map=res.map,
+                     noise=res.noise.map, adequacy=res.adequacy, parameters=res.parameters)
 
 
-def _joint_adequacy(own: list[IdentificationResult], bad: list[int]) -> dict[str, Any]:
+def _joint_adequacy(own: list[Identification], bad: list[int]) -> dict[str, Any]:
     if not bad:
         return {"adequate": True, "line": f"model adequate on every one of the {len(own)} "
                                           "records", "records": []}
-    lines = [f"record {i + 1}: {own[i].summary['adequacy']['line']}" for i in bad]
+    lines = [f"record {i + 1}: {own[i].adequacy.line}" for i in bad]
     return {"adequate": False, "records": [i + 1 for i in bad],
             "line": (f"model NOT adequate on {len(bad)} of {len(own)} records; the joint "
                      "intervals combine each record's reported posterior, with its model "
                      "error integrated out. " + " | ".join(lines))}
 
 
-def _check_agreement(summary: dict[str, Any], own: list[IdentificationResult],
+def _check_agreement(summary: dict[str, Any], own: list[Identification],
                      shared: list[str], rig: Any) -> None:
     """Whether the records agree on the shared parameters (consistency.py); where they do
     not, the joint interval becomes the random-effects one and the adequacy says so."""
-    found = agreement({n: [o.summary["parameters"][n]["mean"] for o in own] for n in shared},
-                      {n: [o.summary["parameters"][n]["sd"] for o in own] for n in shared})
+    found = agreement({n: [o.parameters[n].mean for o in own] for n in shared},
+                      {n: [o.parameters[n].sd for o in own] for n in shared})
     summary["agreement"] = found
     if not found["disagree"]:
         return
     for n in found["disagree"]:
         row = found["parameters"][n]
-        one = replace(own[0].map, theta=np.array([row["random_effects_mean"]]))
+        one = replace(own[0].map_result, theta=np.array([row["random_effects_mean"]]))
         summary["parameters"][n] = _summary(
             [n], one, np.array([[row["random_effects_sd"] ** 2]]), rig)[n]
     ad = summary["adequacy"]
@@ -252,7 +251,7 @@ def _check_agreement(summary: dict[str, Any], own: list[IdentificationResult],
                   if not ad.get("records") else ad["line"] + " | " + found["line"])
 
 
-def _product_of_reported(summary: dict[str, Any], own: list[IdentificationResult],
+def _product_of_reported(summary: dict[str, Any], own: list[Identification],
                          names: tuple[str, ...], joint_names: list[str], idx: list[NDArray],
                          prior_set: PriorSet, rig: Any) -> None:
     """Replace the joint Laplace intervals by the product of the records' reported
@@ -263,18 +262,18 @@ def _product_of_reported(summary: dict[str, Any], own: list[IdentificationResult
     b = np.zeros(p)
     for res, ix in zip(own, idx, strict=True):
         for j, n in enumerate(names):
-            v = res.summary["parameters"][n]
-            if not (np.isfinite(v["sd"]) and v["sd"] > 0):
+            v = res.parameters[n]
+            if not (np.isfinite(v.sd) and v.sd > 0):
                 continue
-            P[ix[j], ix[j]] += 1.0 / v["sd"] ** 2
-            b[ix[j]] += v["mean"] / v["sd"] ** 2
+            P[ix[j], ix[j]] += 1.0 / v.sd ** 2
+            b[ix[j]] += v.mean / v.sd ** 2
     for j, pr in enumerate(prior_set.priors):
         if pr.kind == "normal":
             P[j, j] -= (len(own) - 1) / pr.b ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         sd = np.where(np.diag(P) > 0, 1.0 / np.sqrt(np.diag(P)), np.nan)
         mean = np.where(np.diag(P) > 0, b / np.diag(P), np.nan)
-    m = replace(own[0].map, theta=mean)
+    m = replace(own[0].map_result, theta=mean)
     summary["parameters_model_only"] = summary["parameters"]
     summary["parameters"] = _summary(joint_names, m, np.diag(sd ** 2), rig)
     summary["parameters_from"] = ("the product of each record's reported posterior (its "

@@ -17,15 +17,17 @@ differs, so the two agree to a few units of rounding per term: tests/test_kernel
 ``bayes_amb.inference.whittle._logdet_and_trace``, band by band.
 
 Compiled on first use and cached on disk (numba ``cache=True``); single-threaded (the
-parallelism is the batch over walkers and the tool's own worker pools). Set
-``BAYES_AMB_KERNEL=numpy`` to use the numpy path instead, ``lapack`` for the first compiled
-path (both for comparison; KERNEL_MODES).
+parallelism is the batch over walkers and the tool's own worker pools). Which path a
+likelihood takes is its model's :class:`Engine`, chosen once when the forward model is
+built: ``BAYES_AMB_KERNEL=numpy`` then gives the numpy path, ``lapack`` the first compiled
+path (both kept as references, KERNEL_MODES; benchmarks/README.md).
 """
 
 from __future__ import annotations
 
 import itertools
 import os
+from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
@@ -43,8 +45,8 @@ any kernel."""
 
 
 def kernel_mode() -> str:
-    """The likelihood path in force: ``BAYES_AMB_KERNEL`` (one of KERNEL_MODES), default
-    "numba"."""
+    """The likelihood path asked for in the environment: ``BAYES_AMB_KERNEL`` (one of
+    KERNEL_MODES), default "numba". Read once per model (:func:`engine_from_env`)."""
     value = os.environ.get(KERNEL_ENV, "numba").strip().lower() or "numba"
     if value not in KERNEL_MODES:
         from bayes_amb.errors import BayesAmbError
@@ -54,14 +56,43 @@ def kernel_mode() -> str:
     return value
 
 
-def use_compiled() -> bool:
-    """Whether the likelihood uses these kernels (``BAYES_AMB_KERNEL`` "numba" or "lapack")."""
-    return kernel_mode() != "numpy"
+@dataclass(frozen=True)
+class Engine:
+    """The likelihood engine: which path computes the modal form, the residual DFT, the
+    band sums and the band algebra. Chosen once when a forward model is built
+    (``ForwardModel.engine``, from ``BAYES_AMB_KERNEL``); every likelihood of that model
+    reads it there, so which path ran for a call is the model's ``engine.mode``.
+
+    mode: "numba" (the default: everything compiled, the modal form included), "lapack"
+    (the first compiled path: modal form by LAPACK, compiled band sums) or "numpy" (the
+    reference path before any kernel). The two other paths are kept as references the
+    default is measured and tested against (benchmarks/README.md, "likelihood paths";
+    tests/test_kernels.py).
+    """
+
+    mode: str = "numba"
+
+    def __post_init__(self) -> None:
+        if self.mode not in KERNEL_MODES:
+            from bayes_amb.errors import BayesAmbError
+
+            raise BayesAmbError(f"likelihood engine: expected one of "
+                                f"{', '.join(KERNEL_MODES)}, got {self.mode!r}")
+
+    @property
+    def compiled(self) -> bool:
+        """Whether the residual DFT and band sums are compiled ("numba" or "lapack")."""
+        return self.mode != "numpy"
+
+    @property
+    def compiled_modal(self) -> bool:
+        """Whether the modal form, ZOH and band algebra are compiled too ("numba")."""
+        return self.mode == "numba"
 
 
-def compiled_modal() -> bool:
-    """Whether the modal form, ZOH and band algebra are compiled too (the default "numba")."""
-    return kernel_mode() == "numba"
+def engine_from_env() -> Engine:
+    """The engine ``BAYES_AMB_KERNEL`` asks for (default "numba")."""
+    return Engine(kernel_mode())
 
 
 CHUNK_BINS = 512

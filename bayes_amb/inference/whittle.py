@@ -246,9 +246,9 @@ class WhittleLikelihood:
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of eps - S(theta) x (scaled, minus any line terms) for a batch, and the
-        stability mask (the compiled kernel, or the numpy path with BAYES_AMB_KERNEL=numpy)."""
+        stability mask (the compiled kernel, or the numpy path with the engine "numpy")."""
         mb, xi = self.modal_state(theta)
-        if kernels.use_compiled():
+        if self.engine.compiled:
             lines, coef = self._line_terms(theta)
             return kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
                                         self.scale, lines, coef), mb.stable
@@ -276,6 +276,11 @@ class WhittleLikelihood:
         P[..., self._I, self._J] = sums
         P[..., self._J, self._I] = np.conj(sums)
         return P
+
+    @property
+    def engine(self) -> kernels.Engine:
+        """The likelihood path, chosen once with the forward model (kernels.Engine)."""
+        return self.forward.engine
 
     def modal_state(self, theta: NDArray) -> tuple[ModalBatch, NDArray]:
         """Modal form of x -> eps for a batch, and xi, the modal state after the record, so
@@ -323,7 +328,7 @@ class WhittleLikelihood:
 
     def _sums_key(self, theta: NDArray) -> tuple:
         """Key of the remembered last batch of band sums (theta C-contiguous float64)."""
-        return (id(self.forward), kernels.use_compiled(), theta.shape, theta.tobytes())
+        return (id(self.forward), self.engine.mode, theta.shape, theta.tobytes())
 
     def _pointwise_fused(self, theta: NDArray, ls: NDArray) -> NDArray | None:
         """pointwise in one compiled call (bayes_amb.inference.fused), or None where the
@@ -334,7 +339,7 @@ class WhittleLikelihood:
         if (type(self) is not WhittleLikelihood or type(self.forward) is not ForwardModel
                 or not self.forward.fast or theta.shape[0] < walker_kernels.LANES_MIN_BATCH
                 or getattr(self, "_row_sums", None) is not None
-                or not kernels.compiled_modal()):
+                or not self.engine.compiled_modal):
             return None
         theta = np.ascontiguousarray(theta, dtype=float)
         key = self._sums_key(theta)
@@ -366,7 +371,7 @@ class WhittleLikelihood:
                           ) -> tuple[NDArray, NDArray]:
         """band_sums through the row memory: the rows not remembered are computed in one
         batch (each row's P_b depends on that row only), the least recently used dropped."""
-        prefix = bytes([kernels.use_compiled()]) + id(self.forward).to_bytes(8, "little")
+        prefix = self.engine.mode.encode() + id(self.forward).to_bytes(8, "little")
         keys = [prefix + row.tobytes() for row in theta]
         missing = list(dict.fromkeys(k for k in keys if k not in memo))
         if missing:
@@ -383,13 +388,13 @@ class WhittleLikelihood:
         return np.stack([o[0] for o in out]), np.array([o[1] for o in out])
 
     def _compute_band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
-        if not kernels.use_compiled():
+        if not self.engine.compiled:
             R, stable = self.residual_dft(theta)
             return self._band_sums(R), stable
         mb, xi = self.modal_state(theta)
         lines, coef = self._line_terms(theta)
         kernel = kernels.residual_band_sums
-        if kernels.compiled_modal() and theta.shape[0] >= walker_kernels.LANES_MIN_BATCH:
+        if self.engine.compiled_modal and theta.shape[0] >= walker_kernels.LANES_MIN_BATCH:
             kernel = walker_kernels.residual_band_sums_lanes
         Pb = kernel(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E, self.scale, self.starts,
                     self.counts, lines, coef)
@@ -405,11 +410,11 @@ class WhittleLikelihood:
         Pb, stable = self.band_sums(theta)                          # (nb, nbands, 4, 4)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
-        if kernels.compiled_modal():
+        if self.engine.compiled_modal:
             logdet, quad, ok = walker_kernels.whittle_terms(sig2, ps, self.n, Pb)
         else:
             Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
-            if kernels.use_compiled():
+            if self.engine.compiled:
                 logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
             else:
                 logdet, quad, ok = _logdet_and_trace(Phi, Pb)

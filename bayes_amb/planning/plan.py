@@ -241,9 +241,9 @@ def noise_from(recording: Recording) -> Noise:
     from bayes_amb.inference.identify import IdentifyOptions, identify
     res = identify(recording, BEARING_COEFFICIENTS,
                    options=IdentifyOptions(map_only=True, adequacy=False))
-    m = res.summary["noise"]["map"]
-    return Noise(noise_rms=m["sigma_noise"]["value"], r1_rms=m["sigma_r1"]["value"],
-                 r2_rms=m["sigma_r2"]["value"])
+    m = res.noise.map
+    return Noise(noise_rms=m["sigma_noise"].value, r1_rms=m["sigma_r1"].value,
+                 r2_rms=m["sigma_r2"].value)
 
 
 def with_duration(design: Design, duration: float) -> Design:

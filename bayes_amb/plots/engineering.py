@@ -210,3 +210,29 @@ def plot_predictive_frf(freq_hz: Any, measured: Any, coherence: Any, draws: Any,
             handles, labels = ax.get_legend_handles_labels()
     fig.legend(handles, labels, loc="outside lower center", ncol=3, fontsize=8.5)
     return fig
+
+
+@styled
+def plot_answers(answers: dict[str, Any], group: str) -> Figure:
+    """Quantities of one group of the engineering answers, each relative to its median
+    (the units differ within a group): the 90 % interval as a bar, the nominal value
+    (theta = 0) as an open circle, in % of the median."""
+    names = list(answers)
+    fig = new_figure(figsize=(7.2, 1.1 + 0.32 * max(len(names), 1)))
+    ax = fig.add_subplot()
+    for i, n in enumerate(names):
+        q = answers[n]
+        ref = abs(q.value) if q.value else 1.0
+        rel = [100.0 * (v - q.value) / ref for v in q.interval90]
+        ax.plot(rel, [i, i], color="#1f4e9a", lw=2.5, label="90 % interval" if i == 0 else None)
+        ax.plot(0.0, i, "o", color="#1f4e9a", label="median" if i == 0 else None)
+        ax.plot(100.0 * (q.nominal - q.value) / ref, i, "o", mfc="none", color="#d9541e",
+                label="nominal (θ = 0)" if i == 0 else None)
+    ax.set_yticks(range(len(names)), [f"{n}: {answers[n].value:.4g} {answers[n].unit}"
+                                      for n in names], fontsize=8)
+    ax.invert_yaxis()
+    ax.axvline(0.0, color="k", lw=0.6)
+    ax.set_xlabel("% of the median")
+    ax.set_title(group)
+    _legend_below(fig, ax, ncol=3)
+    return fig

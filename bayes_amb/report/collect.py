@@ -28,6 +28,8 @@ from numpy.typing import NDArray
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.nonfinite import restore_non_finite
 from bayes_amb.io.recording import Recording, load_recording, load_truth, recording_paths
+from bayes_amb.results.diagnosis import Diagnosis
+from bayes_amb.results.identification import Identification
 from bayes_amb.uncertainty import get_spec
 
 __all__ = ["InputFile", "ReportError", "RunData", "StudyData", "collect_run", "sha256_file"]
@@ -70,21 +72,21 @@ class StudyData:
 class RunData:
     """Everything a report shows about one identification run.
 
-    ``summary`` is summary.json; ``posterior`` the DataTree of posterior.nc (None after a
-    MAP-only run); ``recording`` the loaded recording (None when it cannot be found, with
-    the reason in ``recording_note``); ``truth`` the simulated truth (None for real data);
-    ``diagnosis`` diagnosis.json (None when absent) and ``diagnosis_residuals`` the
-    diagnosis's residuals.nc.
+    ``summary`` is summary.json as an :class:`Identification`; ``posterior`` the DataTree
+    of posterior.nc (None after a MAP-only run); ``recording`` the loaded recording (None
+    when it cannot be found, with the reason in ``recording_note``); ``truth`` the
+    simulated truth (None for real data); ``diagnosis`` diagnosis.json as a
+    :class:`Diagnosis` (None when absent) and ``diagnosis_residuals`` its residuals.nc.
     """
 
     run_dir: Path
-    summary: dict[str, Any]
+    summary: Identification
     posterior: Any = None
     recording: Recording | None = None
     recording_path: Path | None = None
     recording_note: str = ""
     truth: dict[str, Any] | None = None
-    diagnosis: dict[str, Any] | None = None
+    diagnosis: Diagnosis | None = None
     diagnosis_residuals: Any = None
     studies: tuple[StudyData, ...] = ()
     inputs: list[InputFile] = field(default_factory=list)
@@ -92,7 +94,7 @@ class RunData:
     @property
     def names(self) -> tuple[str, ...]:
         """Estimated parameter names, in order."""
-        return tuple(self.summary["parameters_estimated"])
+        return tuple(self.summary.parameters_estimated)
 
     def draws(self, name: str) -> NDArray:
         """Posterior draws of one variable, shape (n_walkers, n_draws)."""
@@ -102,18 +104,18 @@ class RunData:
 
     def theta_point(self) -> NDArray:
         """Posterior mean of theta (the MAP after a MAP-only run), shape (p,)."""
-        src = self.summary["parameters"]
-        return np.array([float(src[n]["mean"]) for n in self.names])
+        src = self.summary.parameters
+        return np.array([float(src[n].mean) for n in self.names])
 
     def theta_map(self) -> NDArray:
-        return np.array([float(self.summary["map"][n]) for n in self.names])
+        return np.array([float(self.summary.map[n]) for n in self.names])
 
     def physical_scale(self, name: str) -> float:
         """Physical value per unit theta (N/m or N s/m) of a parameter."""
         if self.recording is not None:
             return get_spec(name).physical_scale(self.recording.rig)
-        p = self.summary["parameters"][name]
-        return p["physical_mean"] / p["mean"] if p["mean"] else float("nan")
+        p = self.summary.parameters[name]
+        return p.physical_mean / p.mean if p.mean else float("nan")
 
     def band_hz(self) -> float | None:
         """Upper edge of the frequency band the likelihood used (Hz), when recorded."""
@@ -126,11 +128,11 @@ class RunData:
         of the prior's width)."""
         out = []
         for n in self.names:
-            text = str(self.summary.get("priors", {}).get(n, ""))
+            text = str(self.summary.priors.get(n, ""))
             if not (text.startswith("uniform(") and text.endswith(")")):
                 continue
             a, b = (float(v) for v in text[8:-1].split(","))
-            lo, hi = self.summary["parameters"][n]["hdi90"]
+            lo, hi = self.summary.parameters[n].hdi90
             out += [(n, bound) for bound, end in ((a, lo), (b, hi))
                     if abs(end - bound) <= tol * (b - a)]
         return out
@@ -171,7 +173,7 @@ def _read_json(path: Path, what: str) -> dict[str, Any]:
     return restore_non_finite(data)
 
 
-def _read_summary(run_dir: Path) -> dict[str, Any]:
+def _read_summary(run_dir: Path) -> Identification:
     s = _read_json(run_dir / "summary.json", "run summary")
     where = f"run summary {run_dir / 'summary.json'}"
     if s.get("format", SUMMARY_FORMAT) != SUMMARY_FORMAT:
@@ -186,7 +188,7 @@ def _read_summary(run_dir: Path) -> dict[str, Any]:
     for n in names:
         if n not in s["parameters"] or n not in s["map"]:
             raise ReportError(f"{where}: field parameters.{n}: missing")
-    return s
+    return Identification.from_dict(s, where)
 
 
 def _read_posterior(path: Path) -> Any:
@@ -214,7 +216,7 @@ def _find_recording(run: RunData, explicit: str | Path | None) -> None:
         path = Path(explicit)
         run.recording = load_recording(path)      # a bad --recording is the user's error
     else:
-        named = str(run.summary["recording"])
+        named = str(run.summary.recording)
         found = [c for c in _recording_candidates(named, run.run_dir)
                  if c.suffix.lower() == ".csv" and c.is_file()]
         if not found:
@@ -238,7 +240,7 @@ def _check_recording_matches(run: RunData) -> None:
     if run.posterior is None or run.recording is None:
         return
     x = np.asarray(run.posterior["constant_data"]["x"].values)
-    port = run.summary.get("excitation_port") or next(iter(run.recording.excitation))
+    port = run.summary.excitation_port or next(iter(run.recording.excitation))
     rx = np.asarray(run.recording.excitation.get(port, np.empty((0, 4))))
     if rx.shape != x.shape or not np.allclose(rx, x, rtol=1e-12, atol=0.0):
         raise ReportError(f"recording {run.recording.source}: field excitation: it is not the "
@@ -291,7 +293,8 @@ def collect_run(run_dir: str | Path, recording: str | Path | None = None,
         run.posterior = _read_posterior(d / "posterior.nc")
         run.inputs.append(_input("posterior (ArviZ NetCDF)", d / "posterior.nc"))
     if (d / "diagnosis.json").is_file():
-        run.diagnosis = _read_json(d / "diagnosis.json", "diagnosis")
+        run.diagnosis = Diagnosis.from_dict(_read_json(d / "diagnosis.json", "diagnosis"),
+                                            f"diagnosis {d / 'diagnosis.json'}")
         run.inputs.append(_input("model-discrepancy diagnosis", d / "diagnosis.json"))
         if (d / "residuals.nc").is_file():
             import xarray as xr

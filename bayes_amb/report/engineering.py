@@ -78,27 +78,26 @@ def final_draws(run: RunData, n: int, seed: int) -> tuple[Any, str]:
     """The posterior the answers use, and its description: after the diagnosis when it
     named physics (normal draws from its parameters_after mean and sd, independent), else
     the identification's own draws."""
-    dg = run.diagnosis or {}
-    after = dg.get("parameters_after") or {}
-    if dg.get("explanations") and all(
-            isinstance(after.get(nm), dict) and "mean" in after[nm] for nm in run.names):
-        mean = np.array([float(after[nm]["mean"]) for nm in run.names])
+    dg = run.diagnosis
+    after = dg.parameters_after if dg is not None else {}
+    if dg is not None and dg.explanations and all(nm in after for nm in run.names):
+        mean = np.array([float(after[nm].mean) for nm in run.names])
         sd = []
         for nm in run.names:
             v = after[nm]
-            s = v.get("sd")
-            if not isinstance(s, (int, float)) or not np.isfinite(s):
-                lo, hi = v.get("hdi90", [np.nan, np.nan])
+            s = v.sd
+            if s is None or not np.isfinite(s):
+                lo, hi = v.hdi90
                 s = (hi - lo) / 3.29
             sd.append(float(s))
         rng = np.random.default_rng(seed)
         th = mean + np.array(sd) * rng.standard_normal((n, len(run.names)))
         return Draws(run.names, th), ("draws of the final model after the diagnosis "
                                       "(normal, from its parameters' mean and sd)")
-    lc = run.summary.get("laplace_cov") if isinstance(run.summary, dict) else None
+    lc = run.summary.laplace_cov
     src = ("posterior draws of the identification (emcee)" if run.posterior is not None
            else "draws of the Laplace approximation of summary.json ("
-           + ("normal, with its correlations)" if isinstance(lc, dict)
+           + ("normal, with its correlations)" if lc is not None
               else "independent normals)"))
     return draws_from(run, n, seed), src
 
@@ -154,8 +153,7 @@ def engineering_section(run: RunData, opts: ReportOptions
         "min(10 + 17 (1 − 1/(AF − 1.5)), 26) % above the running speed, AF = 1/(2ζ) (none "
         "required for AF < 2.5). 'uncertain': the 90 % interval straddles the limit.",
     ]
-    dg = run.diagnosis or {}
-    named = [str(e.get("effect", "?")) for e in dg.get("explanations", []) or []]
+    named = [e.effect for e in run.diagnosis.explanations] if run.diagnosis else []
     if named:
         paras.append("The physics the diagnosis named (" + ", ".join(named) + ") is not part "
                      "of these closed-loop models: they use the identified stiffness and "

@@ -26,6 +26,7 @@ from bayes_amb.plots.style import style_context
 from bayes_amb.reduction.fidelity import singular_value_data
 from bayes_amb.report.collect import RunData
 from bayes_amb.report.derived import Derived, ResidualTests, time_window, welch
+from bayes_amb.results.diagnosis import Diagnosis
 from bayes_amb.rotor import campbell_data
 
 __all__ = ["ReportFigure", "controller_figures", "data_figures", "discrepancy_figures",
@@ -202,11 +203,11 @@ def identification_figures(run: RunData, d: Derived | None,
                                                               "sigma_r2")
              if s in run.posterior["posterior"]}
     lab, truth = _labels(run), run.true_theta()
-    point = {n: float(run.summary["map"][n]) for n in names}
+    point = {n: float(run.summary.map[n]) for n in names}
     both, lab_c, truth_c, point_c = _centred({**draws, **noise}, lab, truth, point)
     pair_vars = dict(list(both.items())[:6])
-    priors = {n: _prior_grid(run.summary["priors"][n]) for n in names
-              if n in run.summary.get("priors", {})}
+    priors = {n: _prior_grid(run.summary.priors[n]) for n in names
+              if n in run.summary.priors}
     figs = [
         render_figure(pp.plot_trace(both, lab_c, truth_c, point_c), "trace", "Trace plots",
                       "Every walker against draw index, with the marginal histogram. The "
@@ -284,11 +285,11 @@ def validation_figure(tests: ResidualTests, port: str, dt: float) -> ReportFigur
         "residual must not correlate with the excitation if the model is right.")
 
 
-def discrepancy_figures(diag: dict[str, Any], residuals: Any,
+def discrepancy_figures(diag: Diagnosis, residuals: Any,
                         truth: dict[str, float]) -> list[ReportFigure]:
     """Figures of diagnosis.json and residuals.nc (when present)."""
     figs = []
-    mm = diag.get("mismatch", {})
+    mm = diag.mismatch
     if residuals is not None:
         figs.append(render_figure(
             pdisc.plot_location(residuals, diag), "disc_location", "Where the model fails",
@@ -296,23 +297,23 @@ def discrepancy_figures(diag: dict[str, Any], residuals: Any,
             "the excitation explains; circles: significant) and residual power over the "
             "fitted noise floor. Shaded: the located bands."))
         figs.append(render_figure(
-            pdisc.plot_residual_spectra(residuals, mm.get("bands_hz", [])), "disc_spectra",
+            pdisc.plot_residual_spectra(residuals, mm.bands_hz), "disc_spectra",
             "Residual spectra before and after",
             "Welch spectra of ε and of the residual ε − ε̂ of the nominal model and of the "
             "model with the named physics."))
-    if diag.get("explanations"):
+    if diag.explanations:
         figs.append(render_figure(
             pdisc.plot_improvement(diag), "disc_gain", "Where the named physics helps",
             "Log-likelihood gain of the chosen model over the nominal one per frequency "
             "band; shaded: the bands holding 80 % of the gain."))
-    if diag.get("candidates"):
+    if diag.candidates:
         figs.append(render_figure(
             pdisc.plot_candidates(diag), "disc_candidates", "Evidence per candidate",
             "Bars: screening gain; diamonds: log Bayes factor of the candidates fitted "
             "fully (values at or below 0.01 drawn at 0.01); dashed: acceptance threshold. "
             f"Per round the candidates fitted fully and the best of the others, "
             f"{pdisc.CANDIDATES_SHOWN} in all (every candidate: the table above)."))
-    if diag.get("parameters_before"):
+    if diag.parameters_before:
         figs.append(render_figure(
             pdisc.plot_parameters(diag, truth), "disc_params",
             "Stiffness and damping before and after",

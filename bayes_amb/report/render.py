@@ -29,6 +29,8 @@ from bayes_amb.report.collect import ReportError, RunData
 from bayes_amb.report.derived import derive
 from bayes_amb.report.discrepancy import discrepancy_section
 from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, g, gsd
+from bayes_amb.results.diagnosis import Coefficient, Diagnosis, Unexplained
+from bayes_amb.results.identification import Posterior
 from bayes_amb.rig import CHANNELS
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import get_spec
@@ -182,76 +184,68 @@ def write_pdf(sections: list[Section], meta: dict[str, Any], path: Path,
     return "matplotlib"
 
 
-def _sd(v: dict[str, Any]) -> float:
-    sd = v.get("sd")
-    if isinstance(sd, (int, float)) and math.isfinite(sd):
-        return float(sd)
-    lo, hi = v.get("hdi90", [math.nan, math.nan])
+def _sd(v: Coefficient | Posterior) -> float:
+    """A parameter's sd, or its 90 % HDI's width / 3.29 when the sd is not finite."""
+    if v.sd is not None and math.isfinite(v.sd):
+        return float(v.sd)
+    lo, hi = v.hdi90
     return float(hi - lo) / 3.29
 
 
-def _estimate(n: str, v: dict[str, Any], run: RunData, truth: dict[str, float]) -> str:
-    sd, (lo, hi) = _sd(v), v["hdi90"]
+def _estimate(n: str, v: Coefficient | Posterior, run: RunData,
+              truth: dict[str, float]) -> str:
+    sd, (lo, hi) = _sd(v), v.hdi90
     spec = get_spec(n)
     sc = run.physical_scale(n)
     t = f"; true value {truth[n]:g}" if n in truth else ""
-    return (f"{n} = {gsd(v['mean'], sd)} (90 % HDI {gsd(lo, sd)} to {gsd(hi, sd)}), "
-            f"physical {spec.physical_label} = {gsd(v['mean'] * sc, abs(sd * sc))}\u00a0"
+    return (f"{n} = {gsd(v.mean, sd)} (90 % HDI {gsd(lo, sd)} to {gsd(hi, sd)}), "
+            f"physical {spec.physical_label} = {gsd(v.mean * sc, abs(sd * sc))}\u00a0"
             f"{spec.unit.replace('/', '/\u2060')}{t}")
 
 
-def _flags(run: RunData, truth: dict[str, float]) -> list[str]:
+def _flags(run: RunData, dg: Diagnosis, truth: dict[str, float]) -> list[str]:
     """Where the corrected (after-diagnosis) model is less consistent with other evidence
     than the nominal one: a channel it fits worse, an estimate that moves onto a prior
     bound, or (simulated data) an interval that loses the truth the nominal one held."""
-    dg = run.diagnosis or {}
     out = []
-    fit = dg.get("fit") or {}
-    before, after = fit.get("before") or {}, fit.get("after") or {}
-    for key, worse, what in (("nrmse", lambda a, b: a > b * 1.001, "a larger NRMSE"),
-                             ("whiteness_p", lambda a, b: a < b and a < 0.01,
-                              "a less white residual")):
-        bv, av = before.get(key) or {}, after.get(key) or {}
-        if isinstance(bv, dict) and isinstance(av, dict):
-            bad = [ch for ch in av if isinstance(av.get(ch), (int, float))
-                   and isinstance(bv.get(ch), (int, float)) and worse(av[ch], bv[ch])]
-            if bad:
-                out.append(f"FLAG: the corrected model has {what} than the nominal one on "
-                           f"{', '.join(bad)}.")
-    pb, pa = dg.get("parameters_before") or {}, dg.get("parameters_after") or {}
-    for n in pa:
-        a, b = pa[n], pb.get(n, {})
-        text = str(run.summary.get("priors", {}).get(n, ""))
-        if text.startswith("uniform(") and text.endswith(")") and "hdi90" in a:
+    for before, after, worse, what in (
+            (dg.fit.before.nrmse, dg.fit.after.nrmse, lambda a, b: a > b * 1.001,
+             "a larger NRMSE"),
+            (dg.fit.before.whiteness_p, dg.fit.after.whiteness_p,
+             lambda a, b: a < b and a < 0.01, "a less white residual")):
+        bad = [ch for ch in after if ch in before and worse(after[ch], before[ch])]
+        if bad:
+            out.append(f"FLAG: the corrected model has {what} than the nominal one on "
+                       f"{', '.join(bad)}.")
+    pb, pa = dg.parameters_before, dg.parameters_after
+    for n, a in pa.items():
+        text = str(run.summary.priors.get(n, ""))
+        if text.startswith("uniform(") and text.endswith(")"):
             lo_b, hi_b = (float(x) for x in text[8:-1].split(","))
             tol = 0.01 * (hi_b - lo_b)
-            if any(abs(e - bd) <= tol for e in a["hdi90"] for bd in (lo_b, hi_b)):
+            if any(abs(e - bd) <= tol for e in a.hdi90 for bd in (lo_b, hi_b)):
                 out.append(f"FLAG: {n} after the correction presses against its prior "
                            "bound; the correction does not settle it.")
-        if n in truth and "hdi90" in a and "hdi90" in b:
-            t = truth[n]
-            if not a["hdi90"][0] <= t <= a["hdi90"][1] and b["hdi90"][0] <= t <= b["hdi90"][1]:
+        if n in truth and n in pb:
+            t, b = truth[n], pb[n]
+            if not a.hdi90[0] <= t <= a.hdi90[1] and b.hdi90[0] <= t <= b.hdi90[1]:
                 out.append(f"FLAG: {n}'s corrected 90 % HDI misses the true value {t:g}, "
                            "which the nominal fit's interval held.")
-    for c in dg.get("checks") or []:
-        if isinstance(c, dict) and c.get("passed") is False:
-            out.append(f"FLAG (diagnosis check): {c.get('name', c.get('check', '?'))}: "
-                       f"{c.get('message', c.get('detail', 'failed'))}")
+    for c in dg.checks:
+        if not c.ok:
+            out.append(f"FLAG (diagnosis check): {c.check}: {c.line}")
     return out
 
 
-def _unexplained(un: Any) -> str:
-    """One clause for diagnosis.json's "unexplained": a dict (present, channels, bands_hz,
-    ...) since the physics library, a plain string before it; "" when nothing is left."""
-    if isinstance(un, str):
-        return un.strip()
-    if not isinstance(un, dict) or not un.get("present"):
+def _unexplained(un: Unexplained) -> str:
+    """One clause for the diagnosis's unexplained structure; "" when nothing is left."""
+    if not un.present:
         return ""
-    bands = un.get("bands_hz") or []
+    bands = un.bands_hz
     where = ", ".join(f"{g(lo)}–{g(hi)}" for lo, hi in bands[:4])
     where = (f" in {where}" + (f" and {len(bands) - 4} more bands" if len(bands) > 4 else "")
              + " Hz") if bands else ""
-    channels = ", ".join(un.get("channels") or []) or "?"
+    channels = ", ".join(un.channels) or "?"
     return (f"structure coherent with the excitation on channel(s) {channels}{where} that "
             "no model in the library explains")
 
@@ -259,44 +253,43 @@ def _unexplained(un: Any) -> str:
 def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
     """Leads with the final model: after the diagnosis when it named physics (with the
     identification's nominal fit as "before"), else the identification."""
-    s, truth = run.summary, run.true_theta()
-    dg = run.diagnosis or {}
-    adequacy = (dg.get("adequacy") or s.get("adequacy") or {}).get("line")
-    final = (dg.get("adequacy_after") or {}).get("line") if dg.get("explanations") else None
+    s, truth, dg = run.summary, run.true_theta(), run.diagnosis
+    nominal_adequacy = dg.adequacy if dg is not None and dg.adequacy else s.adequacy
+    adequacy = nominal_adequacy.line if nominal_adequacy is not None else None
+    final = (dg.adequacy_after.line if dg is not None and dg.explanations
+             and dg.adequacy_after is not None else None)
     if final:
         bullets = [f"Adequacy of the final model (after the diagnosis): {final} The nominal "
                    f"model: {adequacy}"]
     else:
         bullets = [f"Adequacy of the model: {adequacy}"] if adequacy else []
-    named = [str(e.get("description", e.get("effect", "?")))
-             for e in dg.get("explanations") or []]
-    after = dg.get("parameters_after") or {}
+    named = [e.description for e in dg.explanations] if dg is not None else []
+    after = dg.parameters_after if dg is not None else {}
     if named and after:
         bullets.append("Final model: the nominal model with " + "; ".join(named)
                        + " (named by the diagnosis; see Model discrepancy).")
         for n in run.names:
             if n not in after:
                 continue
-            p = s["parameters"][n]
+            p = s.parameters[n]
             bullets.append(_estimate(n, after[n], run, truth) + ". Before (nominal model, "
-                           f"identification): {gsd(p['mean'], p.get('sd'))} (90 % HDI "
-                           f"{gsd(p['hdi90'][0], p.get('sd'))} to "
-                           f"{gsd(p['hdi90'][1], p.get('sd'))}).")
-            pb = (dg.get("parameters_before") or {}).get(n)
-            if pb and abs(pb["mean"] - p["mean"]) > 0.5 * max(_sd(pb), 1e-12):
+                           f"identification): {gsd(p.mean, p.sd)} (90 % HDI "
+                           f"{gsd(p.hdi90[0], p.sd)} to {gsd(p.hdi90[1], p.sd)}).")
+            pb = dg.parameters_before.get(n)
+            if pb and abs(pb.mean - p.mean) > 0.5 * max(_sd(pb), 1e-12):
                 bullets.append(f"{n}: the diagnosis's own nominal fit gives "
-                               f"{g(pb['mean'])}, not {g(p['mean'])}"
+                               f"{g(pb.mean)}, not {g(p.mean)}"
                                ": it uses every frequency up to Nyquist with an integrated "
                                "noise spectrum, the identification only the reduced "
                                "model's validity band.")
-        bullets += _flags(run, truth)
+        bullets += _flags(run, dg, truth)
     else:
-        bullets += [_estimate(n, s["parameters"][n], run, truth) + "." for n in run.names]
-        if dg:
+        bullets += [_estimate(n, s.parameters[n], run, truth) + "." for n in run.names]
+        if dg is not None:
             bullets.append("Model discrepancy: " + ("a mismatch was located but no missing "
-                           "physics named" if (dg.get("mismatch") or {}).get("detected")
+                           "physics named" if dg.mismatch.detected
                            else "no mismatch found") + " (see Model discrepancy).")
-    unexplained = _unexplained(dg.get("unexplained"))
+    unexplained = _unexplained(dg.unexplained) if dg is not None else ""
     if unexplained:
         bullets.append("The diagnosis leaves part of the mismatch unexplained: "
                        + unexplained + " (see Model discrepancy).")
@@ -305,9 +298,9 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
                 "move it further than the prior allows, often a sign that the model misses "
                 "an effect (see Validation)." for n, b in run.prior_bound_hits()]
     bullets.append("The sampler converged (R-hat ≤ 1.01, ESS ≥ 400, ≥ 50 τ)."
-                   if s.get("converged") else "The sampler did NOT converge: treat the "
+                   if s.converged else "The sampler did NOT converge: treat the "
                    "intervals as provisional (see Identification).")
-    bullets += list(s.get("identifiability", {}).get("notes", []))
+    bullets += list((s.identifiability or {}).get("notes", []))
     if "eng" in facts:
         ld, pk = facts["eng"]["min_logdec"], facts["eng"]["worst_peak"]
         ok = "met" if ld.lo > 0.1 else "NOT met" if ld.hi <= 0.1 else "uncertain"
@@ -373,7 +366,7 @@ def build_sections(run: RunData, argv: list[str], opts: ReportOptions,
     if run.studies:
         body.append(sc.studies_section(run))
     body.append(sc.provenance_section(run, argv))
-    name = Path(str(run.summary["recording"])).stem
+    name = Path(str(run.summary.recording)).stem
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     meta = {"title": f"Identification report: {name}",
             "subtitle": f"Run folder {run.run_dir.name}; made {now} by bayes-amb "

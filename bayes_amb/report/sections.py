@@ -240,51 +240,50 @@ def identification_section(run: RunData, d: dv.Derived | None, opts: ReportOptio
     truth = run.true_theta()
     est, conv = [], []
     for n in run.names:
-        p, sc = s["parameters"][n], run.physical_scale(n)
-        lo, hi = p["hdi90"]
-        plo, phi = p["physical_hdi90"]
-        sd, psd = p.get("sd"), p.get("physical_sd")
-        u = "\u00a0" + p["unit"].replace("/", "/\u2060")   # no line break inside "3 N/m"
+        p, sc = s.parameters[n], run.physical_scale(n)
+        lo, hi = p.hdi90
+        plo, phi = p.physical_hdi90
+        sd, psd = p.sd, p.physical_sd
+        u = "\u00a0" + p.unit.replace("/", "/\u2060")   # no line break inside "3 N/m"
         true = f"{truth[n]:g} ({truth[n] * sc:g}{u})" if n in truth else "–"
-        est.append([n, gsd(s["map"][n], sd), f"{gsd(p['mean'], sd)} ± {g(sd, 2)}",
+        est.append([n, gsd(s.map[n], sd), f"{gsd(p.mean, sd)} ± {g(sd, 2)}",
                     f"[{gsd(lo, sd)}, {gsd(hi, sd)}]",
-                    f"{gsd(p['physical_mean'], psd)}{u}",
+                    f"{gsd(p.physical_mean, psd)}{u}",
                     f"[{gsd(plo, psd)}, {gsd(phi, psd)}]{u}", true])
-        conv.append([n, g(p.get("r_hat")), g(p.get("ess_bulk"), 3), g(p.get("ess_tail"), 3),
-                     g(p.get("tau"), 3)])
+        conv.append([n, g(p.r_hat), g(p.ess_bulk, 3), g(p.ess_tail, 3), g(p.tau, 3)])
     meanings = "; ".join(f"{n}: {get_spec(n).meaning}" for n in run.names)
     tables = [Table("Estimates: θ is dimensionless, the physical value beside it (90 % HDI: "
                     "highest-density interval)", ["parameter", "MAP", "mean ± sd",
                                                   "90 % HDI", "physical mean",
                                                   "physical 90 % HDI", "true (simulated)"],
                     est, meanings, wrap=(2, 3, 5, 6))]
-    if s.get("sampler"):
-        sm = s["sampler"]
+    if s.sampler is not None:
+        sm = s.sampler
         tables.append(Table(
-            f"Convergence ({sm['walkers']} walkers, {sm['steps']} steps, burn-in "
-            f"{sm['burn']}, thin {sm['thin']}, {g(sm['n_tau'], 3)} autocorrelation times, "
-            f"acceptance {g(sm['acceptance_mean'], 2)})",
+            f"Convergence ({sm.walkers} walkers, {sm.steps} steps, burn-in "
+            f"{sm.burn}, thin {sm.thin}, {g(sm.n_tau, 3)} autocorrelation times, "
+            f"acceptance {g(sm.acceptance_mean, 2)})",
             ["parameter", "R-hat", "ESS bulk", "ESS tail", "τ (steps)"], conv,
             "Converged means R-hat ≤ 1.01, bulk ESS ≥ 400 and at least 50 τ."))
-    noise = s.get("noise", {})
-    post = noise.get("posterior", {})
-    nrows = [[k, g(v["value"], 3), g(post.get(k, {}).get("mean"), 3),
-              f"[{g(post.get(k, {}).get('q05'), 3)}, {g(post.get(k, {}).get('q95'), 3)}]",
-              v["unit"]] for k, v in noise.get("map", {}).items()]
+    noise = s.noise
+    post = (noise.posterior or {}) if noise is not None else {}
+    nrows = [[k, g(v.value, 3), g(post[k].mean if k in post else None, 3),
+              f"[{g(post[k].q05 if k in post else None, 3)}, "
+              f"{g(post[k].q95 if k in post else None, 3)}]",
+              v.unit] for k, v in (noise.map if noise is not None else {}).items()]
     if nrows:
         tables.append(Table("Noise intensities", ["source", "MAP", "posterior mean",
-                                                  "5–95 %", "unit"], nrows,
-                            noise.get("model", "")))
-    ident = s.get("identifiability", {})
+                                                  "5–95 %", "unit"], nrows, noise.model))
+    ident = s.identifiability or {}
     corr = ident.get("correlation", {})
     if len(corr.get("names", [])) > 1:
         tables.append(Table("Posterior correlation", ["", *corr["names"]],
                             [[a, *(f"{v:+.2f}" for v in row)]
                              for a, row in zip(corr["names"], corr["matrix"], strict=True)]))
-    verdict = "converged" if s.get("converged") else "NOT converged"
-    paras = [f"Inference: {s.get('inference', '?')} ({verdict}; {g(s.get('wall_s'), 3)} s). "
-             f"MAP by {s.get('map_method', '?')}. Priors: "
-             + ", ".join(f"{k} ~ {v}" for k, v in s.get("priors", {}).items()) + "."]
+    verdict = "converged" if s.converged else "NOT converged"
+    paras = [f"Inference: {s.inference} ({verdict}; {g(s.wall_s, 3)} s). "
+             f"MAP by {s.map_method or '?'}. Priors: "
+             + ", ".join(f"{k} ~ {v}" for k, v in s.priors.items()) + "."]
     if run.posterior is None:
         paras.append("No posterior.nc in the run folder (MAP-only run): the intervals are "
                      "the Laplace approximation, and no sampler diagnostics are shown.")
@@ -354,10 +353,10 @@ def provenance_section(run: RunData, argv: list[str]) -> Section:
     prov = (run.recording.meta.get("provenance") if run.recording is not None else None) or {}
     bullets = [f"Report command: {display_argv(argv) if argv else '(Python API)'}",
                f"bayes-amb {__version__} (identification ran with "
-               f"{s.get('package_version', '?')}); Python {platform.python_version()}, "
+               f"{s.package_version}); Python {platform.python_version()}, "
                f"numpy {np.__version__}, arviz {arviz.__version__}, matplotlib "
                f"{matplotlib.__version__}",
-               f"Identification seed {s.get('seed', '?')}; MAP {s.get('map_method', '?')}; "
+               f"Identification seed {s.seed}; MAP {s.map_method or '?'}; "
                f"recording provenance: {json.dumps(prov) if prov else 'none given'}",
                *(f"Study {st.name}: seed {st.seed}" for st in run.studies),
                "Figures of posterior draws use a fixed seed, so the same inputs give the "

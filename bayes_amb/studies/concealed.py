@@ -24,6 +24,7 @@ from bayes_amb.discrepancy import DiagnoseOptions, diagnose
 from bayes_amb.discrepancy.library.registry import VOCABULARY, entry
 from bayes_amb.discrepancy.model import model_context
 from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.results.diagnosis import Explanation
 from bayes_amb.simulate import (
     EFFECT_DEFAULTS,
     SimulationConfig,
@@ -103,13 +104,13 @@ def true_physical(effect: Effect, ctx: Any) -> dict[str, float]:
     return out
 
 
-def named_effects(explanations: list[dict[str, Any]]) -> set[str]:
+def named_effects(explanations: list[Explanation]) -> set[str]:
     """The effects named by a diagnosis, each with its equivalence class (an effect counts
     as named when an explanation it cannot be told apart from is)."""
     out = set()
     for x in explanations:
-        out.add(x["effect"])
-        out |= {k.partition("@")[0] for k in x.get("equivalence_class", [])}
+        out.add(x.effect)
+        out |= {k.partition("@")[0] for k in x.equivalence_class}
     return out
 
 
@@ -141,44 +142,43 @@ def run_case(rig: Any, ctrl: Any, base: SimulationConfig, case: str, params: tup
         rec, _ = simulate_recording(rig, ctrl, cfg)
         row["concealment"] = concealment(rig, ctrl, cfg, np.asarray(rec.y)) if hidden else 0.0
         d = diagnose(rec, params, options=DiagnoseOptions(seed=sim_seed % 1000))
-        rep = d.report
         ctx = model_context(ForwardModel(rec, params))
-        named = [(e["effect"], e["location"]) for e in rep["explanations"]]
+        named = [(e.effect, e.location) for e in d.explanations]
         row["named"] = ";".join(f"{n}@{loc}" for n, loc in named)
-        row["detected"] = bool(rep["mismatch"]["detected"])
+        row["detected"] = bool(d.mismatch.detected)
         row["n_named"] = len(named)
         names_named = {n for n, _ in named}
-        in_class = named_effects(rep["explanations"])
+        in_class = named_effects(d.explanations)
         row["hits"] = sum(e.name in in_class for e in hidden)
         row["false_names"] = len({n for n in names_named if not any(
             e.name in named_effects([x]) for e in hidden
-            for x in rep["explanations"] if x["effect"] == n)})
+            for x in d.explanations if x.effect == n)})
         row["all_named"] = row["hits"] == len(hidden)
         row["exact"] = row["all_named"] and row["false_names"] == 0
         covered, located = [], []
         for e in hidden:
-            match = ([x for x in rep["explanations"] if x["effect"] == e.name]
-                     or [x for x in rep["explanations"] if e.name in named_effects([x])])
+            match = ([x for x in d.explanations if x.effect == e.name]
+                     or [x for x in d.explanations if e.name in named_effects([x])])
             if not match:
                 continue
             x = match[0]
-            located.append(not true_location(e) or x["location"] == true_location(e))
+            located.append(not true_location(e) or x.location == true_location(e))
             for k, v in true_physical(e, ctx).items():
-                if k not in x["params"]:
+                if k not in x.params:
                     continue
-                lo, hi = x["params"][k]["hdi90"]
+                lo, hi = x.params[k].hdi90
                 ok = lo <= v <= hi
                 covered.append(ok)
                 row[f"{e.name}.{k}.true"] = v
-                row[f"{e.name}.{k}.map"] = x["params"][k]["map"]
+                row[f"{e.name}.{k}.map"] = x.params[k].map
                 row[f"{e.name}.{k}.hdi_lo"], row[f"{e.name}.{k}.hdi_hi"] = lo, hi
         row["n_covered"] = sum(covered)
         row["n_checked"] = len(covered)
         row["n_located"] = sum(located)
-        for n, v in rep["parameters_before"].items():
-            row[f"{n}_before"] = v["mean"]
-            row[f"{n}_after"] = rep["parameters_after"][n]["mean"]
-        row["diagnose_s"] = rep["wall_s"]
+        for n, v in d.parameters_before.items():
+            row[f"{n}_before"] = v.mean
+            row[f"{n}_after"] = d.parameters_after[n].mean
+        row["diagnose_s"] = d.wall_s
         row["error"] = ""
     except Exception as exc:
         row["error"] = f"{type(exc).__name__}: {exc}"

@@ -16,6 +16,7 @@ import numpy as np
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.inference.priors import parse_prior
+from bayes_amb.results.identification import Posterior
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import simulate_recording
 from bayes_amb.studies.concealed import run_case
@@ -91,15 +92,14 @@ def run_replicate(spec: StudySpec, cell_index: int, rep: int) -> dict[str, Any]:
         res = identify(rec, estimate, priors, IdentifyOptions(
             walkers=spec.walkers, steps=spec.steps, map_only=spec.inference == "laplace",
             seed=samp_seed))
-        s = res.summary
-        row["converged"] = bool(s["converged"])
+        row["converged"] = bool(res.converged)
         for j, n in enumerate(estimate):
-            v = s["parameters"][n]
-            lo, hi = v["hdi90"]
-            row.update({f"{n}_map": s["map"][n], f"{n}_mean": v["mean"], f"{n}_sd": v["sd"],
+            v = res.parameters[n]
+            lo, hi = v.hdi90
+            row.update({f"{n}_map": res.map[n], f"{n}_mean": v.mean, f"{n}_sd": v.sd,
                         f"{n}_hdi_lo": lo, f"{n}_hdi_hi": hi,
                         f"{n}_covered": bool(lo <= truth[n] <= hi),
-                        f"{n}_rhat": v["r_hat"], f"{n}_ess": v["ess_bulk"]})
+                        f"{n}_rhat": v.r_hat, f"{n}_ess": v.ess_bulk})
             row.update(_rank_stats(res, j, truth[n], v))
             row[f"{n}_q"] = row.pop("_q")
             row[f"{n}_rank"] = row.pop("_rank")
@@ -112,7 +112,7 @@ def run_replicate(spec: StudySpec, cell_index: int, rep: int) -> dict[str, Any]:
     return row
 
 
-def _rank_stats(res: Any, j: int, true: float, v: dict[str, Any]) -> dict[str, Any]:
+def _rank_stats(res: Any, j: int, true: float, v: Posterior) -> dict[str, Any]:
     """Posterior quantile q of the true value, and its rank among N_RANK_DRAWS draws."""
     if res.samples is not None:
         flat = res.samples.reshape(-1, res.samples.shape[-1])[:, j]
@@ -121,7 +121,7 @@ def _rank_stats(res: Any, j: int, true: float, v: dict[str, Any]) -> dict[str, A
         rank = int(np.sum(flat[idx] < true))
     else:                                   # Laplace: normal quantile
         from scipy.stats import norm
-        sd = v["sd"] if v["sd"] and np.isfinite(v["sd"]) and v["sd"] > 0 else np.inf
-        q = float(norm.cdf((true - v["mean"]) / sd))
+        sd = v.sd if v.sd and np.isfinite(v.sd) and v.sd > 0 else np.inf
+        q = float(norm.cdf((true - v.mean) / sd))
         rank = round(q * N_RANK_DRAWS)
     return {"_q": q, "_rank": rank}

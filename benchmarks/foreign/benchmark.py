@@ -293,7 +293,7 @@ def run_identify(csv: Path, path: Path) -> dict[str, Any]:
         res = identify(load_recording(csv), list(COEFFICIENTS),
                        options=IdentifyOptions(map_only=True))
         path.parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(path, result_json_text(plain(res.summary, float)))
+        write_text_atomic(path, result_json_text(plain(res.to_dict(), float)))
         error = None
     except Exception as exc:  # a benchmark row, not a crash
         error = f"{type(exc).__name__}: {exc}"
@@ -327,7 +327,7 @@ def run(out: Path, kinds: list[str], per_kind: int, seed: int, duration: float,
         t0, c0 = time.perf_counter(), time.process_time()
         try:
             d = diagnose(load_recording(paths["csv"]))
-            report = d.report
+            report = d.to_dict()
             error = None
         except Exception as exc:  # a benchmark row, not a crash: record and go on
             report, error = None, f"{type(exc).__name__}: {exc}"

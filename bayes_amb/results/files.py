@@ -1,0 +1,39 @@
+"""Reading and writing the result files: one-line errors naming the file, atomic writes."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+from bayes_amb.errors import ResultError
+
+
+def read_result(path: Path) -> dict[str, Any]:
+    """A result file's JSON object, its non-finite numbers put back."""
+    from bayes_amb.io.nonfinite import restore_non_finite
+
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise ResultError(f"{path}: not found") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
+        raise ResultError(f"{path}: not valid JSON ({exc})") from None
+    if not isinstance(data, dict):
+        raise ResultError(f"{path}: expected a JSON object, got {type(data).__name__}")
+    return restore_non_finite(data)
+
+
+def require_format(path: Path, data: dict[str, Any], expected: str) -> None:
+    """Refuse a file of another kind or a newer major version than this package reads."""
+    got = data.get("format")
+    if got != expected:
+        raise ResultError(f"{path}: field format: expected {expected!r}, got {got!r}")
+
+
+def write_result(path: Path, block: Any) -> None:
+    """Write a result block's JSON atomically (non-finite numbers as null, listed)."""
+    from bayes_amb.io.atomic import write_text_atomic
+    from bayes_amb.io.nonfinite import result_json_text
+
+    write_text_atomic(path, result_json_text(block.to_dict()))

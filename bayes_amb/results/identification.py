@@ -1,0 +1,222 @@
+"""The result of ``identify``: :class:`Identification`, the typed content of an identify run
+folder.
+
+    res = identify(rec, "k_By")            # or Identification.load("runs/paper")
+    res.parameters["k_By"].mean, res.parameters["k_By"].hdi90, res.converged
+    print(res.summary())
+    res.plot("trace")
+    res.save("runs/paper")                 # summary.json (and posterior.nc after sampling)
+
+``summary.json`` (format ``bayes-amb-summary/1``) is this object serialised (see
+results/blocks.py for the rules). One recording's fit has ``recording``, its noise and the
+sampler; a joint fit of several (inference/joint.py) has ``recordings`` and each record's
+own fit under ``records``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Self
+
+import numpy as np
+
+from bayes_amb.errors import BayesAmbError, ResultError
+from bayes_amb.results.blocks import Block, block, omitted, runtime
+from bayes_amb.results.diagnosis import Adequacy
+from bayes_amb.results.files import read_result, require_format, write_result
+
+if TYPE_CHECKING:
+    import xarray as xr
+    from matplotlib.figure import Figure
+
+    from bayes_amb.inference.estimate import MapResult
+    from bayes_amb.inference.whittle import WhittleLikelihood
+
+FORMAT = "bayes-amb-summary/1"
+FILE = "summary.json"
+
+
+@block
+class Posterior(Block):
+    """A parameter's posterior: normalised theta (mean, sd, 90 % HDI), its sampler
+    diagnostics (None for a Laplace approximation) and its physical value."""
+
+    mean: float
+    sd: float
+    hdi90: list[float]
+    ess_bulk: float | None = None
+    ess_tail: float | None = None
+    r_hat: float | None = None
+    tau: float | None = None
+    unit: str
+    physical: str | None = omitted()
+    physical_mean: float
+    physical_sd: float | None = omitted()
+    physical_hdi90: list[float]
+    true: float | None = omitted()
+
+
+@block
+class NoiseValue(Block):
+    value: float
+    unit: str
+
+
+@block
+class NoisePosterior(Block):
+    mean: float
+    q05: float
+    q95: float
+    unit: str
+    tau: float | None = None
+
+
+@block
+class Noise(Block):
+    """The noise model and its intensities (MAP; posterior after sampling)."""
+
+    model: str
+    map: dict[str, NoiseValue]
+    posterior: dict[str, NoisePosterior] | None = omitted()
+
+
+@block
+class LaplaceCov(Block):
+    names: list[str]
+    theta: list[list[float]]
+
+
+@block
+class Sampler(Block):
+    walkers: int
+    moves: str
+    steps: int
+    burn: int
+    thin: int
+    n_tau: float
+    acceptance_mean: float
+    wall_s: float | None = omitted()
+    likelihood_evals: int | None = omitted()
+
+
+@block
+class RecordFit(Block):
+    """One record's own fit inside a joint posterior."""
+
+    recording: str
+    speed_rpm: float
+    dt: float
+    excitation_port: Any = None
+    map: dict[str, float]
+    noise: dict[str, NoiseValue]
+    adequacy: Adequacy | None = None
+    parameters: dict[str, Posterior]
+
+
+@block
+class Identification(Block):
+    """Everything ``identify`` (or ``identify_joint``) found: the content of summary.json,
+    with the posterior draws (posterior.nc) when it sampled."""
+
+    format: str = FORMAT
+    package_version: str
+    recording: str | None = omitted()
+    recordings: list[str] | None = omitted()
+    parameters_estimated: list[str]
+    per_record_parameters: list[str] | None = omitted()
+    priors: dict[str, Any]
+    map: dict[str, float]
+    map_method: str | None = omitted()
+    map_wall_s: float | None = omitted()
+    noise: Noise | None = omitted()
+    fast_path: Any = omitted()
+    excitation_port: Any = omitted()
+    n_bands: int | None = omitted()
+    seed: int = 0
+    adequacy: Adequacy | None = omitted()
+    inference: str
+    parameters: dict[str, Posterior]
+    laplace_cov: LaplaceCov | None = omitted()
+    records: list[RecordFit] | None = omitted()
+    converged: bool
+    sampler: Sampler | None = omitted()
+    identifiability: dict[str, Any] | None = omitted()
+    agreement: dict[str, Any] | None = omitted()
+    inference_note: str | None = omitted()
+    parameters_model_only: dict[str, Posterior] | None = omitted()
+    parameters_from: str | None = omitted()
+    wall_s: float | None = omitted()
+
+    names: tuple[str, ...] | None = runtime()
+    map_result: MapResult | None = runtime()
+    posterior: xr.DataTree | None = runtime()
+    samples: np.ndarray | None = runtime()
+    eps: np.ndarray | None = runtime()
+    likelihood: WhittleLikelihood | None = runtime()
+
+    where = FILE
+
+    def summary(self) -> str:
+        """A table: each parameter's mean, sd and 90 % interval, normalised and physical,
+        with the inference, the convergence and the adequacy line."""
+        lines = [f"{self.inference}; converged: {self.converged}"]
+        if self.adequacy is not None:
+            lines.append(self.adequacy.line)
+        w = max(len(n) for n in self.parameters)
+        for n, p in self.parameters.items():
+            lines.append(f"{n:<{w}}  {p.mean:+.4f} +- {p.sd:.4f}  "
+                         f"[{p.hdi90[0]:+.4f}, {p.hdi90[1]:+.4f}]   {p.physical_mean:.4g} "
+                         f"[{p.physical_hdi90[0]:.4g}, {p.physical_hdi90[1]:.4g}] {p.unit}")
+        return "\n".join(lines)
+
+    def plot(self, kind: str = "posterior") -> Figure:
+        """A figure of plots/posterior.py from the draws (after sampling): 'posterior'
+        (marginals and pairs) or 'trace'."""
+        from bayes_amb.plots import posterior as pp
+
+        if self.posterior is None:
+            raise BayesAmbError(f"plot {kind!r}: no posterior draws (a MAP-only fit, or "
+                                "posterior.nc was not in its run folder)")
+        if kind not in ("posterior", "trace"):
+            raise BayesAmbError(f"plot kind {kind!r}: known kinds posterior, trace")
+        names = list(self.parameters_estimated)
+        draws = {n: np.asarray(self.posterior["posterior"][n].values, dtype=float)
+                 for n in names}
+        labels = {n: f"{n} [{self.parameters[n].unit}]" for n in names}
+        if kind == "trace":
+            return pp.plot_trace(draws, labels, {}, self.map)
+        return pp.plot_pair(draws, labels, {}, self.map)
+
+    def save(self, run_dir: str | Path) -> Path:
+        """Write RUN_DIR/summary.json (and posterior.nc after sampling), atomically."""
+        from bayes_amb.inference.posterior import save_datatree
+
+        d = Path(run_dir)
+        d.mkdir(parents=True, exist_ok=True)
+        if self.posterior is not None:
+            save_datatree(self.posterior, d / "posterior.nc")
+        write_result(d / FILE, self)
+        return d
+
+    @classmethod
+    def load(cls, run_dir: str | Path) -> Self:
+        """The identification a run folder holds (summary.json; posterior.nc when
+        present). A folder without summary.json, or a file of another format, is a one-line
+        error naming it."""
+        import dataclasses
+
+        d = Path(run_dir)
+        data = read_result(d / FILE)
+        require_format(d / FILE, data, FORMAT)
+        out = cls.from_dict(data, str(d / FILE))
+        post = None
+        if (d / "posterior.nc").is_file():
+            import arviz as az
+
+            try:
+                post = az.from_netcdf(d / "posterior.nc").load()
+            except (OSError, ValueError) as exc:
+                raise ResultError(f"{d / 'posterior.nc'}: cannot be read as ArviZ NetCDF "
+                                  f"({exc})") from None
+        return dataclasses.replace(out, posterior=post,
+                                   names=tuple(out.parameters_estimated))
