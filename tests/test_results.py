@@ -91,3 +91,23 @@ def test_the_schema_document_is_the_codes():
     from bayes_amb.results.schema import markdown
     doc = Path(__file__).resolve().parents[1] / "docs" / "results.md"
     assert doc.read_text() == markdown()
+
+
+def test_a_node_refits_rows_go_into_its_round_in_the_report():
+    """A diagnosis that moved a force node by node has rows of round "1 node"; the report's
+    candidate table and figure crashed on them before the typed results (int("1 node"), a
+    sort of int and str)."""
+    from bayes_amb.plots.discrepancy import plot_candidates
+    from bayes_amb.report.discrepancy import _candidate_table
+    rows = [{"effect": "cross_coupling", "location": "n20", "round": 1, "screen_gain": 40.0,
+             "log_bayes_factor": 30.0},
+            {"effect": "cross_coupling", "location": "n22", "round": "1 node",
+             "screen_gain": None, "log_bayes_factor": 33.0},
+            {"effect": "sensor_gain", "location": "Ax", "round": 2, "screen_gain": 1.0}]
+    d = Diagnosis.from_dict({**diagnosis_json(), "candidates": rows})
+    table = _candidate_table(d.candidates)
+    assert table.header[2:] == ["round 1: gain (nats)", "round 1: log BF",
+                                "round 2: gain (nats)", "round 2: log BF"]
+    assert [r[:2] for r in table.rows] == [["cross_coupling", "n20"],
+                                           ["cross_coupling", "n22"], ["sensor_gain", "Ax"]]
+    assert len([ax for ax in plot_candidates(d).axes if ax.get_visible()]) == 2
