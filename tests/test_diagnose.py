@@ -18,6 +18,7 @@ from bayes_amb.discrepancy import DiagnoseOptions, all_candidates, diagnose
 from bayes_amb.discrepancy.library import BEARING_COEFFICIENTS
 from bayes_amb.discrepancy.locate import _coherence, holm, merge_spans
 from bayes_amb.io.recording import load_recording, save_recording
+from bayes_amb.results import Diagnosis
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
 from bayes_amb.uncertainty import get_spec
@@ -217,6 +218,10 @@ def test_cli_diagnose_writes_the_documented_file(ctrl, tmp_path, capsys):
     assert set(r["parameters_before"]) == set(r["parameters_after"]) == set(BEARING_COEFFICIENTS)
     assert [e["effect"] for e in r["explanations"]] == ["sensor_gain"]
     assert (out / "residuals.nc").is_file() and (out / "models" / "nominal.nc").is_file()
+    loaded = Diagnosis.load(out)                  # the CLI's folder as the typed result
+    assert loaded.effects == ["sensor_gain"] and loaded.to_dict() == r
+    assert "psd_after" in loaded.residuals and "step1_sensor_gain" in loaded.models
+    assert loaded.plot("location") is not None
     # the stored truth never reaches the diagnosis: the same numbers without it
     side = json.loads(csv_path.with_suffix(".json").read_text())
     side.pop("truth")

@@ -41,6 +41,7 @@ from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.inference.priors import PriorSet
 from bayes_amb.io.recording import load_recording, load_truth, save_recording
+from bayes_amb.results import Identification
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 from tests.helpers import run_cli
@@ -305,6 +306,9 @@ def test_cli_identify_json(cli_recording, tmp_path, capsys):
     assert abs(s["map"]["k_By"] - 0.5) < 4 * s["parameters"]["k_By"]["sd"]
     assert json.loads((out_dir / "summary.json").read_text()) == s
     assert (out_dir / "posterior.nc").is_file()
+    loaded = Identification.load(out_dir)         # the CLI's folder as the typed result
+    assert loaded.to_dict() == s and loaded.posterior is not None
+    assert loaded.plot("trace") is not None and "k_By" in loaded.summary()
 
 
 @pytest.mark.parametrize(("args", "needle"), [

@@ -28,7 +28,9 @@ import scipy.stats as st
 import bayes_amb
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import parse_prior
+from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.plots.studies import study_figures
+from bayes_amb.results.study import Study
 from bayes_amb.studies import (
     StudyError,
     finalise,
@@ -40,8 +42,8 @@ from bayes_amb.studies import (
     sbc_statistics,
     study_from_dict,
 )
+from bayes_amb.studies.binomial import binomial_band, binomial_interval
 from bayes_amb.studies.replicate import N_RANK_DRAWS, replicate_id
-from bayes_amb.studies.summary import binomial_band, binomial_interval
 
 STUDIES = Path(__file__).resolve().parents[1] / "studies"
 CONSOLE = Path(sys.executable).with_name("bayes-amb")
@@ -97,8 +99,8 @@ def finished(tmp_path_factory) -> tuple[object, Path, list[dict]]:
     out = tmp_path_factory.mktemp("tiny")
     spec = study_from_dict(tiny(), "tiny.toml")
     rows = run_study(spec, out, workers=1)
-    finalise(spec, rows, out)
-    study_figures(spec, out)
+    study = finalise(spec, rows, out)
+    study_figures(spec, out, study)
     return spec, out, rows
 
 
@@ -407,7 +409,10 @@ def test_non_finite_numbers_make_valid_json(finished, tmp_path):
     assert canon(back[3:]) == canon(rows[3:])
     m = finalise(spec, back, tmp_path)
     text = (tmp_path / "study.json").read_text(encoding="utf-8")
-    assert _strict(text)["n_rows"] == 6 and m["n_rows"] == 6
+    assert _strict(text)["n_rows"] == 6 and m.n_rows == 6
+    loaded = Study.load(tmp_path)
+    assert loaded == m and len(loaded.rows) == 6 and loaded.finished
+    assert result_json_text(loaded.to_dict()) == text       # study.json, byte for byte
     _strict((out / "study.json").read_text(encoding="utf-8"))
 
 

@@ -51,16 +51,16 @@ def run(args: argparse.Namespace) -> int:
                                   f"{shlex.quote(args.study)} --out "
                                   f"{shlex.quote(args.out)} --resume") + "\n")
         return exc.exit_status
-    manifest = finalise(spec, rows, args.out)
+    study = finalise(spec, rows, args.out)
+    figures = []
     if not args.no_figures:
         from bayes_amb.plots.studies import study_figures
-        manifest["figures"] = [str(p) for p in study_figures(spec, args.out)]
+        figures = [str(p) for p in study_figures(spec, args.out, study)]
     d = {"study": spec.name, "out": args.out, "rows": len(rows),
-         "failures": manifest["failures"], "conclusions": manifest["conclusions"],
-         "sbc": manifest.get("sbc"), "benchmark": manifest.get("benchmark"),
-         "figures": manifest.get("figures", [])}
-    text = [f"study '{spec.name}': {len(rows)} replicates ({manifest['failures']} failed), "
+         "failures": study.failures, "conclusions": study.conclusions,
+         "sbc": study.sbc, "benchmark": study.benchmark, "figures": figures}
+    text = [f"study '{spec.name}': {len(rows)} replicates ({study.failures} failed), "
             f"results in {args.out}/"]
-    text += [f"  - {c}" for c in manifest["conclusions"]]
+    text += [f"  - {c}" for c in study.conclusions or []]
     emit(d, "\n".join(text), args.json)
     return 0

@@ -10,11 +10,10 @@ from typing import Any
 import numpy as np
 from matplotlib.figure import Figure
 
-from bayes_amb.io.nonfinite import read_result_json
 from bayes_amb.plots.style import new_figure, save_figure, style_context, styled
+from bayes_amb.studies.binomial import binomial_band
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec
-from bayes_amb.studies.summary import binomial_band
 
 
 def _read_csv(path: Path) -> list[dict[str, str]]:
@@ -140,8 +139,9 @@ def plot_sbc_coverage(sbc: dict[str, Any]) -> Figure:
     return fig
 
 
-def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
-    """Write DIR/figures/*.png for a finished study; returns the paths."""
+def study_figures(spec: StudySpec, out_dir: str | Path, study: Any) -> list[Path]:
+    """Write DIR/figures/*.png for a finished study (``study``: its
+    bayes_amb.results.Study, as finalise returns it); returns the paths."""
     out = Path(out_dir)
     figdir = out / "figures"
     figdir.mkdir(exist_ok=True)
@@ -154,13 +154,10 @@ def study_figures(spec: StudySpec, out_dir: str | Path) -> list[Path]:
             for n in spec.estimate:
                 fig = plot_factor(summary, factor, n)
                 paths.append(save_figure(fig, figdir / f"{factor}_{n}.png"))
-        manifest = read_result_json((out / "study.json").read_text(encoding="utf-8"))
-        if manifest.get("benchmark"):
+        if study.benchmark:
             from bayes_amb.plots.discrepancy import plot_benchmark
-            paths.append(save_figure(plot_benchmark(manifest["benchmark"]),
-                                     figdir / "benchmark.png"))
-        if manifest.get("sbc"):
-            paths.append(save_figure(plot_sbc_ranks(manifest["sbc"]), figdir / "sbc_ranks.png"))
-            paths.append(save_figure(plot_sbc_coverage(manifest["sbc"]),
-                                     figdir / "sbc_coverage.png"))
+            paths.append(save_figure(plot_benchmark(study.benchmark), figdir / "benchmark.png"))
+        if study.sbc:
+            paths.append(save_figure(plot_sbc_ranks(study.sbc), figdir / "sbc_ranks.png"))
+            paths.append(save_figure(plot_sbc_coverage(study.sbc), figdir / "sbc_coverage.png"))
     return paths

@@ -30,6 +30,8 @@ from bayes_amb.io.nonfinite import restore_non_finite
 from bayes_amb.io.recording import Recording, load_recording, load_truth, recording_paths
 from bayes_amb.results.diagnosis import Diagnosis
 from bayes_amb.results.identification import Identification
+from bayes_amb.results.study import FORMAT as STUDY_FORMAT
+from bayes_amb.results.study import Study
 from bayes_amb.uncertainty import get_spec
 
 __all__ = ["InputFile", "ReportError", "RunData", "StudyData", "collect_run", "sha256_file"]
@@ -255,24 +257,20 @@ def _read_study(path: Path) -> StudyData:
     if "conclusions" not in m:
         raise ReportError(f"study manifest {path / 'study.json'}: field conclusions: missing "
                           "(the study has not finished)")
-    spec = m.get("study") or {}
-    if isinstance(spec, dict) and isinstance(spec.get("study"), dict):
-        spec = spec["study"]                    # study.json holds StudySpec.to_dict()
-    conc = m["conclusions"]
-    if isinstance(conc, str):
-        conc = [conc]
+    if isinstance(m["conclusions"], str):
+        m["conclusions"] = [m["conclusions"]]
+    st = Study.from_dict({"format": STUDY_FORMAT, "package_version": "?", "study": {},
+                          "cells": [], "seeds": {}, **m},
+                         f"study manifest {path / 'study.json'}")
     rows: tuple[dict[str, str], ...] = ()
     if (path / "summary.csv").is_file():
         with (path / "summary.csv").open(newline="", encoding="utf-8") as fh:
             rows = tuple(csv.DictReader(fh))
     figs = tuple(sorted((path / "figures").glob("*.png"))) if (path / "figures").is_dir() \
         else ()
-    seed = spec.get("seed") if isinstance(spec, dict) else None
-    return StudyData(path=path, name=str(spec.get("name", path.name)),
-                     description=str(spec.get("description", "")),
-                     conclusions=tuple(str(c) for c in conc), figures=figs,
-                     seed=seed if isinstance(seed, int) else None,
-                     n_rows=m.get("n_rows"), summary_rows=rows)
+    return StudyData(path=path, name=st.name or path.name, description=st.description,
+                     conclusions=tuple(str(c) for c in st.conclusions), figures=figs,
+                     seed=st.seed, n_rows=st.n_rows, summary_rows=rows)
 
 
 def collect_run(run_dir: str | Path, recording: str | Path | None = None,

@@ -77,6 +77,8 @@ class Check(Block):
 
 @block
 class RecordWindow(Block):
+    """The part of the record compared with the model: samples before ``start_s`` drive it only."""
+
     start_s: float
     at_rest: bool
     meaning: str = ""
@@ -110,6 +112,8 @@ class Finding(Block):
 
 @block
 class SpectralLine(Block):
+    """A line in the residual spectrum, and whether it sits at the running speed (1x)."""
+
     freq_hz: float
     channels: list[str]
     p_value: float
@@ -119,6 +123,8 @@ class SpectralLine(Block):
 
 @block
 class Evidence(Block):
+    """How strong the location tests' evidence of a mismatch is (Holm-adjusted, family-wise)."""
+
     p_adjusted_min: float | None = None
     strength: str = ""
     family_min_p_adjusted: dict[str, float] | None = omitted()
@@ -211,6 +217,8 @@ class StandIn(Block):
 
 @block
 class BalancingPlane(Block):
+    """One correction plane: unbalance magnitude and phase with their intervals."""
+
     plane: str
     z_m: float
     u_kgm: Estimate
@@ -254,12 +262,16 @@ class CandidateScore(Block):
 
 @block
 class FitQuality(Block):
+    """Per channel: NRMSE of the residual and the Ljung-Box p-value of its whitened form."""
+
     nrmse: dict[str, float]
     whiteness_p: dict[str, float]
 
 
 @block
 class FitComparison(Block):
+    """The fit of the nominal and the chosen model, per channel, and the log-likelihood gain."""
+
     before: FitQuality
     after: FitQuality
     log_likelihood_gain: float
@@ -280,6 +292,8 @@ class ModelError(Block):
 
 @block
 class ModelErrors(Block):
+    """The model error integrated out of the nominal (before) and reported (after) posteriors."""
+
     before: ModelError | None = None
     after: ModelError | None = None
 

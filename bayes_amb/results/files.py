@@ -31,6 +31,22 @@ def require_format(path: Path, data: dict[str, Any], expected: str) -> None:
         raise ResultError(f"{path}: field format: expected {expected!r}, got {got!r}")
 
 
+def read_rows(path: Path) -> list[dict[str, Any]]:
+    """Rows of a .jsonl file (a study's results.jsonl); a torn last line (killed
+    mid-write) is ignored; non-finite numbers put back."""
+    from bayes_amb.io.nonfinite import read_result_json
+
+    if not path.is_file():
+        return []
+    rows = []
+    for line in path.read_text(encoding="utf-8").splitlines():
+        try:
+            rows.append(read_result_json(line))
+        except json.JSONDecodeError:
+            continue
+    return rows
+
+
 def write_result(path: Path, block: Any) -> None:
     """Write a result block's JSON atomically (non-finite numbers as null, listed)."""
     from bayes_amb.io.atomic import write_text_atomic

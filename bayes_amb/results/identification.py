@@ -58,12 +58,16 @@ class Posterior(Block):
 
 @block
 class NoiseValue(Block):
+    """A noise intensity (MAP) and its unit."""
+
     value: float
     unit: str
 
 
 @block
 class NoisePosterior(Block):
+    """A noise intensity's posterior: mean, 5 and 95 % quantiles, unit, autocorrelation time."""
+
     mean: float
     q05: float
     q95: float
@@ -82,12 +86,17 @@ class Noise(Block):
 
 @block
 class LaplaceCov(Block):
+    """The Laplace covariance of theta at the MAP (normalised units), with its names."""
+
     names: list[str]
     theta: list[list[float]]
 
 
 @block
 class Sampler(Block):
+    """The emcee run: walkers, moves, steps, burn-in, thinning, autocorrelation times and
+    acceptance."""
+
     walkers: int
     moves: str
     steps: int

@@ -13,7 +13,6 @@ a script that calls :func:`run_study` must guard its top level with
 
 from __future__ import annotations
 
-import json
 import logging
 import multiprocessing
 import os
@@ -31,25 +30,13 @@ from bayes_amb import __version__
 from bayes_amb.errors import StudyInterrupted
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.io.nonfinite import plain, read_result_json, result_json_line, result_json_text
+from bayes_amb.results.files import read_rows
 from bayes_amb.studies.replicate import replicate_id, replicate_seeds, run_replicate
 from bayes_amb.studies.spec import StudyError, StudySpec
 from bayes_amb.studies.stopping import StopSignals, kill_processes, worker_init
 
 _DASK_LOG_ENV = "DASK_LOGGING__DISTRIBUTED"
 _POLL_S = 0.2          # how often the parent looks for finished replicates and signals
-
-
-def read_rows(path: Path) -> list[dict[str, Any]]:
-    """Rows of results.jsonl; a torn last line (killed mid-write) is ignored."""
-    if not path.is_file():
-        return []
-    rows = []
-    for line in path.read_text(encoding="utf-8").splitlines():
-        try:
-            rows.append(read_result_json(line))
-        except json.JSONDecodeError:
-            continue
-    return rows
 
 
 def drop_torn_tail(path: Path) -> None:

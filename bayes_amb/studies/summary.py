@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -13,25 +14,11 @@ from scipy import stats
 
 from bayes_amb.io.atomic import write_netcdf_atomic, write_text_atomic
 from bayes_amb.io.nonfinite import plain, read_result_json, result_json_text
+from bayes_amb.results.study import Study
+from bayes_amb.studies.binomial import binomial_band, binomial_interval
 from bayes_amb.studies.concealed import benchmark_conclusions, benchmark_table
 from bayes_amb.studies.replicate import N_RANK_DRAWS
 from bayes_amb.studies.spec import StudySpec, cell_estimate
-
-
-def binomial_interval(k: int, n: int, level: float = 0.95) -> tuple[float, float]:
-    """Clopper-Pearson interval of a proportion k/n."""
-    if n == 0:
-        return (float("nan"), float("nan"))
-    a = 1 - level
-    lo = stats.beta.ppf(a / 2, k, n - k + 1) if k > 0 else 0.0
-    hi = stats.beta.ppf(1 - a / 2, k + 1, n - k) if k < n else 1.0
-    return float(lo), float(hi)
-
-
-def binomial_band(n: int, p: float, level: float = 0.99) -> tuple[float, float]:
-    """Central band of the observed coverage fraction for n datasets at nominal p."""
-    a = 1 - level
-    return (float(stats.binom.ppf(a / 2, n, p) / n), float(stats.binom.isf(a / 2, n, p) / n))
 
 
 def write_csv(path: Path, rows: list[dict[str, Any]]) -> None:
@@ -161,8 +148,9 @@ def conclusions(spec: StudySpec, summary: list[dict[str, Any]],
 
 
 def finalise(spec: StudySpec, rows: list[dict[str, Any]], out_dir: str | Path,
-             sbc: bool | None = None) -> dict[str, Any]:
-    """Write results.csv, summary.csv, results.nc and conclusions into study.json."""
+             sbc: bool | None = None) -> Study:
+    """Write results.csv, summary.csv, results.nc and conclusions into study.json; returns
+    the finished study (results/study.py)."""
     out = Path(out_dir)
     write_csv(out / "results.csv", rows)
     if spec.inference == "diagnose":
@@ -178,10 +166,10 @@ def finalise(spec: StudySpec, rows: list[dict[str, Any]], out_dir: str | Path,
                      "conclusions": text, "sbc": sbc_stats,
                      "wall_s_total": float(sum(r.get("wall_s", 0.0) for r in rows))})
     write_text_atomic(out / "study.json", result_json_text(plain(manifest)))
-    return manifest
+    return replace(Study.from_dict(plain(manifest), str(out / "study.json")), rows=rows)
 
 
-def _finalise_benchmark(rows: list[dict[str, Any]], out: Path) -> dict[str, Any]:
+def _finalise_benchmark(rows: list[dict[str, Any]], out: Path) -> Study:
     """Concealed-effect benchmark: per-case table (summary.csv) and the four targets."""
     table = benchmark_table(rows)
     write_csv(out / "summary.csv", [{"case": c, **v} for c, v in table["per_case"].items()])
@@ -191,7 +179,7 @@ def _finalise_benchmark(rows: list[dict[str, Any]], out: Path) -> dict[str, Any]
                      "conclusions": benchmark_conclusions(table), "benchmark": table,
                      "wall_s_total": float(sum(r.get("wall_s", 0.0) for r in rows))})
     write_text_atomic(out / "study.json", result_json_text(plain(manifest)))
-    return manifest
+    return replace(Study.from_dict(plain(manifest), str(out / "study.json")), rows=rows)
 
 
 def _write_netcdf(path: Path, rows: list[dict[str, Any]]) -> None:
