@@ -3,9 +3,11 @@
 For each effect-free foreign record of a benchmark run (benchmarks/foreign/benchmark.py with
 --identify), the plan is made as a user with that rig would make it: the record's rig,
 controller, speed and dt, its excitation (a random binary of the record's amplitude at its
-port, its length), and the noise intensities identify fitted on it (`--noise-from`). The
-predicted posterior sd is compared with the sd identify reported on that record, and the
-estimates' errors (truth read only here) with the predicted spread.
+port, its length), and its noise as `--noise-from` takes it (planning.noise_from: the white
+intensities identify fits on it and the colour of its residual; --white: the intensities
+alone, as before the colour). The predicted posterior sd is compared with the sd identify
+reported on that record, and the estimates' errors (truth read only here) with the
+predicted spread of the estimates.
 
     PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force
 """
@@ -20,10 +22,10 @@ import numpy as np
 
 from bayes_amb.io.recording import load_recording
 from bayes_amb.planning import Design, Noise, plan
-from bayes_amb.planning.plan import BEARING_COEFFICIENTS
+from bayes_amb.planning.plan import BEARING_COEFFICIENTS, noise_from
 
 
-def check(run: Path, kinds: list[str]) -> dict:
+def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False) -> dict:
     rows = []
     for ident in sorted((run / "identify").glob("*.json")):
         name = ident.stem
@@ -35,24 +37,28 @@ def check(run: Path, kinds: list[str]) -> dict:
         n = s["noise"]["map"]
         design = Design(excitation="random-binary", amplitude=float(np.max(np.abs(x))),
                         duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"])
-        noise = Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
-                      r2_rms=n["sigma_r2"]["value"])
-        p = plan(rec.rig, rec.controller, design, noise, speed_rpm=rec.speed_rpm)
+        noise = (Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
+                       r2_rms=n["sigma_r2"]["value"]) if white else noise_from(rec))
+        at = s["map"] if at_map else None     # the user's estimate from that record
+        p = plan(rec.rig, rec.controller, design, noise, speed_rpm=rec.speed_rpm, theta=at)
         truth = json.loads((run / "recordings" / f"{name}.truth.json").read_text())["theta"]
         par = s.get("parameters_model_only", s["parameters"])
         if any(par[k]["sd"] is None for k in BEARING_COEFFICIENTS):
             continue                        # identify's Laplace failed on this record
         rows.append({"name": name, **{k: {
             "predicted_sd": p.sd(k), "reported_sd": par[k]["sd"],
+            "predicted_spread": p.parameters[k]["sd_of_estimates"],
             "z": (par[k]["mean"] - truth[k]) / p.parameters[k]["sd_of_estimates"]}
             for k in BEARING_COEFFICIENTS}})
     out = {"n": len(rows), "rows": rows, "parameters": {}}
     for k in BEARING_COEFFICIENTS:
         ratio = np.array([r[k]["reported_sd"] / r[k]["predicted_sd"] for r in rows])
         z = np.array([r[k]["z"] for r in rows])
+        spread = np.array([r[k]["predicted_spread"] / r[k]["predicted_sd"] for r in rows])
         out["parameters"][k] = {"median_ratio": float(np.median(ratio)),
                                 "ratio_range": [float(ratio.min()), float(ratio.max())],
-                                "sd_of_z": float(np.std(z, ddof=1))}
+                                "sd_of_z": float(np.std(z, ddof=1)),
+                                "median_spread_over_sd": float(np.median(spread))}
     return out
 
 
@@ -60,13 +66,18 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("run", type=Path)
     ap.add_argument("--kinds", default="control")
+    ap.add_argument("--white", action="store_true",
+                    help="plan with the fitted white intensities alone (no measured colour)")
+    ap.add_argument("--at-map", action="store_true",
+                    help="plan at identify's MAP on the record (default: at the nominal)")
     a = ap.parse_args()
-    r = check(a.run, a.kinds.split(","))
+    r = check(a.run, a.kinds.split(","), a.white, a.at_map)
     print(f"{r['n']} records")
     for k, v in r["parameters"].items():
         print(f"{k}: reported / predicted sd median {v['median_ratio']:.2f} "
               f"(range {v['ratio_range'][0]:.2f}-{v['ratio_range'][1]:.2f}), sd of "
-              f"(estimate - truth) / predicted spread {v['sd_of_z']:.2f}")
+              f"(estimate - truth) / predicted spread {v['sd_of_z']:.2f} (predicted spread "
+              f"/ predicted sd, median {v['median_spread_over_sd']:.2f})")
 
 
 if __name__ == "__main__":

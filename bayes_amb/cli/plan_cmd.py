@@ -15,9 +15,10 @@ from bayes_amb.io.controller_file import load_controller
 from bayes_amb.io.recording import load_recording
 from bayes_amb.planning import Design, Noise, plan
 from bayes_amb.planning.optimise import optimise
-from bayes_amb.planning.plan import noise_from
+from bayes_amb.planning.plan import BEARING_COEFFICIENTS, recorded
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import EXCITATIONS
+from bayes_amb.uncertainty import parse_param_list
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -34,8 +35,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "(default: the reference controller designed for the rig and --dt)")
     p.add_argument("--noise-from", default=None, metavar="REC.csv",
                    help="take the noise, rig, controller and speed from an earlier recording "
-                   "(its noise intensities as identify fits them) (default: none, the noise "
-                   "options are used)")
+                   "(the noise intensities identify fits on it and the colour of its "
+                   "residual), and plan at identify's estimate on it (--set overrides) "
+                   "(default: none, the noise options are used)")
     p.add_argument("--excitation", choices=EXCITATIONS, default="random-binary",
                    help=f"excitation signal, one of {', '.join(EXCITATIONS)} "
                    "(default random-binary)")
@@ -66,7 +68,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="parameters, comma-separated (default: the eight bearing "
                    "coefficients)")
     p.add_argument("--set", action="append", default=[], metavar="NAME=THETA",
-                   help="parameter value the prediction is made at (default 0: nominal)")
+                   help="parameter value the prediction is made at (default 0: nominal; with "
+                   "--noise-from: identify's estimate on that record)")
     p.add_argument("--speed-rpm", type=real(0, unit="rpm"), default=None, metavar="RPM",
                    help="rotor speed, rpm (default: the rig's nominal)")
     p.add_argument("--target", action="append", default=[], metavar="NAME=SD",
@@ -97,9 +100,11 @@ def run(args: argparse.Namespace) -> int:
                               tuple(c.strip() for c in args.channels.split(","))),
                     duration=args.duration, dt=args.dt, port=args.port)
     speed = args.speed_rpm
+    estimate: dict[str, float] = {}
     if args.noise_from:
         rec = load_recording(args.noise_from)
-        rig, ctrl, noise = rec.rig, rec.controller, noise_from(rec)
+        noise, estimate = recorded(rec)
+        rig, ctrl = rec.rig, rec.controller
         speed = rec.speed_rpm if speed is None else speed
         design = Design(**{**design.__dict__, "dt": rec.dt})
     else:
@@ -110,8 +115,11 @@ def run(args: argparse.Namespace) -> int:
                       r1_band_hz=args.r1_band_hz, r2_band_hz=args.r2_band_hz)
     if args.target:
         return _optimise(args, rig, ctrl, design, noise, speed)
-    result = plan(rig, ctrl, design, noise, args.params, parse_assignments(args.set), speed,
-                  seed=args.seed)
+    planned = parse_param_list(",".join(BEARING_COEFFICIENTS) if args.params is None
+                               else args.params)
+    at = {**{k: v for k, v in estimate.items() if k in planned},
+          **parse_assignments(args.set)}    # --noise-from: at that record's estimate
+    result = plan(rig, ctrl, design, noise, args.params, at, speed, seed=args.seed)
     d = result.to_dict()
     extra = ""
     if args.effect:

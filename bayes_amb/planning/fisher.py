@@ -29,6 +29,7 @@ from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.io.recording import Recording
+from bayes_amb.planning.colour import NoiseColour, coloured_spectrum
 
 STEP = 1e-4
 """Central-difference step of the Jacobian (theta units; S is smooth in theta)."""
@@ -65,14 +66,15 @@ def log10_sigma_of(noise_rms: float, r1_rms: float, r2_rms: float) -> NDArray:
 
 def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDArray,
                        log10_sigma: NDArray,
-                       source_gain: Callable[[NDArray], NDArray] | None = None
-                       ) -> Information:
+                       source_gain: Callable[[NDArray], NDArray] | None = None,
+                       colour: NoiseColour | None = None) -> Information:
     """The information of ``recording``'s excitation (its y and u only set the likelihood's
     scale) about ``names`` at ``theta``, for white noise sources of log10 RMS
     ``log10_sigma``; ``source_gain(f)`` (3, nf), if given, the power gain of each source at
     the frequencies f (Hz) of a band-limited one (mean 1 to Nyquist, so that its RMS is
     kept): the noise spectrum is then the true one, not the likelihood's white model, and
-    F the information of an estimator that knows it."""
+    F the information of an estimator that knows it. ``colour`` (colour.py), if given: the
+    white spectrum coloured as measured on an earlier recording is the true one."""
     fwd = ForwardModel(recording, names)
     eps = dual_youla_eps(fwd.parts, np.asarray(recording.y), np.asarray(recording.u))
     like = WhittleLikelihood(fwd, eps)
@@ -82,8 +84,9 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     nb = like.starts.size
     sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
     gain = np.ones((3, nb)) if source_gain is None else source_gain(like.band_freq_hz)
-    phi_true = _spectrum(like, gain * sig2[:, None])
-    ls_model = (np.asarray(log10_sigma, dtype=float) if source_gain is None
+    phi_true = (_spectrum(like, gain * sig2[:, None]) if colour is None
+                else coloured_spectrum(like, log10_sigma, colour))
+    ls_model = (np.asarray(log10_sigma, dtype=float) if source_gain is None and colour is None
                 else white_fit(like, phi_true, log10_sigma))
     phi_model = _spectrum(like, np.repeat(10.0 ** (2 * ls_model)[:, None], nb, axis=1))
     W_band = np.linalg.inv(phi_model)                                   # (n_bands, 4, 4)

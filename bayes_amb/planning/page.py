@@ -30,7 +30,15 @@ def write_plan_page(out: str | Path, plan: dict[str, Any],
     targets = optimised["targets"] if optimised else None
     des, noise = plan["design"], plan["noise"]
     design_rows = [[k, "all" if v is None and k == "channels" else v] for k, v in des.items()]
-    noise_rows = [[k, v] for k, v in noise.items()]
+    noise_rows = [[k, v] for k, v in noise.items() if k != "colour"]
+    if "colour" in noise:                   # measured on an earlier record (colour.py)
+        c = noise["colour"]
+        noise_rows.append(["colour", f"measured on {c['from']} ({c['n_bands']} bands, "
+                           f"{c['f_hz'][0]:.3g}-{c['f_hz'][1]:.3g} Hz); mean diagonal in the "
+                           "lowest third " + ", ".join(f"{v:.2f}" for v in c["low_third"])
+                           + ", highest third "
+                           + ", ".join(f"{v:.2f}" for v in c["high_third"])
+                           + " (1: as white as identify's model)"])
     par_rows = [[n, f"{v['sd']:.3g}", f"{v['physical_sd']:.3g} {v['unit']}",
                  f"{v['sd_of_estimates']:.3g}", f"{v['prior_sd']:.3g}",
                  "yes" if v["informed"] else "NO"] for n, v in plan["parameters"].items()]

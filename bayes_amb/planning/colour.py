@@ -1,0 +1,93 @@
+"""The colour of a rig's noise, measured on a recording (``plan --noise-from``).
+
+identify's likelihood models the noise as three white sources through the closed loop
+(whittle.py). A real rig's sensor noise is often coloured (1/f, an AR(1) drift, a hum), and
+then the spread of identify's estimates is not its reported sd: the estimator is still
+consistent, but its variance is the sandwich F^-1 B F^-1 of the white model's curvature F
+and the score's variance B under the true spectrum (fisher.py).
+
+The true spectrum is measured where the rig's noise shows: the residual of identify's MAP
+on an earlier recording. Per likelihood band b its mean periodogram P_b (4 x 4) is taken
+relative to the white model's spectrum N Phi_b = L_b L_b^H at the fitted intensities,
+
+    C_b = L_b^-1 P_b L_b^-H        (the identity where the noise is as white as modelled),
+
+a colour that does not depend on the record's length, scale or prewhitening. A plan for
+another design carries it over by frequency: Phi_true(f) = L(f) C(f) L(f)^H with the plan's
+own white spectrum L L^H. C_b averages the band's bins (about 40 at 256 bands on 10 000
+bins), so each band's colour has a relative error of about 1/sqrt(n_b); the information
+sums over the bands and averages it further.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.inference.whittle import WhittleLikelihood
+
+
+@dataclass(frozen=True)
+class NoiseColour:
+    """The measured colour C_b (n_bands, 4, 4) at the band frequencies ``f_hz``, from
+    ``source`` (module docstring)."""
+
+    f_hz: NDArray
+    C: NDArray
+    source: str = ""
+
+    def at(self, f: NDArray) -> NDArray:
+        """C at the frequencies f (Hz): linear interpolation of each entry (a convex
+        combination of positive definite matrices, so positive definite), the end bands'
+        colour held beyond the measured range."""
+        f = np.asarray(f, dtype=float)
+        flat = self.C.reshape(self.C.shape[0], -1)
+        out = np.empty((f.size, flat.shape[1]), dtype=complex)
+        for j in range(flat.shape[1]):
+            out[:, j] = (np.interp(f, self.f_hz, flat[:, j].real)
+                         + 1j * np.interp(f, self.f_hz, flat[:, j].imag))
+        return out.reshape(f.size, *self.C.shape[1:])
+
+    def summary(self) -> dict[str, Any]:
+        """What a plan's JSON says of it: source, bands, and the mean colour per channel
+        (diag C: 1 where the noise is as white as modelled) in the lowest and highest
+        third of the band."""
+        d = np.real(np.einsum("bii->bi", self.C))
+        third = max(1, d.shape[0] // 3)
+        return {"from": self.source, "n_bands": int(d.shape[0]),
+                "f_hz": [float(self.f_hz[0]), float(self.f_hz[-1])],
+                "low_third": [float(v) for v in d[:third].mean(axis=0)],
+                "high_third": [float(v) for v in d[-third:].mean(axis=0)]}
+
+
+def white_spectrum(like: WhittleLikelihood, log10_sigma: NDArray) -> NDArray:
+    """N Phi_b (n_bands, 4, 4) of the white sources at log10_sigma (the likelihood's own
+    noise model, prewhitening and scale included)."""
+    sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
+    return np.einsum("s,sbcd->bcd", sig2, like.phi_sources) * like.n
+
+
+def measure_colour(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
+                   source: str = "") -> NoiseColour:
+    """The colour of the residual of ``like`` at (theta, log10_sigma): identify's MAP on
+    the recording whose noise is measured."""
+    R, stable = like.residual_dft(np.atleast_2d(np.asarray(theta, dtype=float)))
+    if not stable[0]:
+        raise ValueError("the model is not stabilised at the fitted parameters")
+    P = like._band_sums(R)[0] / like.counts[:, None, None]
+    L = np.linalg.cholesky(white_spectrum(like, log10_sigma))
+    Li = np.linalg.inv(L)
+    C = Li @ P @ np.conj(np.swapaxes(Li, -1, -2))
+    C = 0.5 * (C + np.conj(np.swapaxes(C, -1, -2)))
+    return NoiseColour(f_hz=np.asarray(like.band_freq_hz, dtype=float), C=C, source=source)
+
+
+def coloured_spectrum(like: WhittleLikelihood, log10_sigma: NDArray,
+                      colour: NoiseColour) -> NDArray:
+    """The true N Phi_b of a likelihood's bands: its white spectrum at log10_sigma
+    coloured by ``colour`` (module docstring)."""
+    L = np.linalg.cholesky(white_spectrum(like, log10_sigma))
+    return L @ colour.at(like.band_freq_hz) @ np.conj(np.swapaxes(L, -1, -2))
