@@ -8,7 +8,10 @@ import pytest
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy.records import diagnose_records, size_agreement
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import save_recording
+from bayes_amb.report.records import write_records_report
+from bayes_amb.results.records import RecordsDiagnosis
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
 from tests.helpers import run_cli
@@ -29,17 +32,20 @@ def recs():
 
 def test_an_effect_named_in_one_record_is_tested_in_all(recs, tmp_path):
     r = diagnose_records(recs)
-    rows = {row["effect"]: row for row in r.across}
+    rows = {row.effect: row for row in r.across}
     row = rows["cross_coupling@D1"]
-    assert 1 in row["named_in"]
-    assert row["present"]["1"] and row["present"]["2"]   # the physics is there
-    assert row["present"]["3"] is False                 # and not in the clean record
-    assert not row["in_every_record"]
-    assert row["size"]["records"] == [1, 2] and row["size"]["agree"]   # one kxy in both
+    assert 1 in row.named_in
+    assert row.present["1"] and row.present["2"]         # the physics is there
+    assert row.present["3"] is False                    # and not in the clean record
+    assert not row.in_every_record
+    assert row.size["records"] == [1, 2] and row.size["agree"]   # one kxy in both
     r.save(tmp_path)
+    write_records_report(tmp_path)
     saved = json.loads((tmp_path / "records.json").read_text())
     assert saved["verdicts"][2] == "no mismatch" and (tmp_path / "record_3").is_dir()
     assert len(saved["speeds_rpm"]) == 3
+    back = RecordsDiagnosis.load(tmp_path)             # the folder as the typed result
+    assert back == r and [d.verdict for d in back.diagnoses] == r.verdicts
     # the report page: each record's fit, the effect across them, what they share
     page = (tmp_path / "records.html").read_text()
     for text in ("Each record", "Effects across the records", "cross_coupling@D1",
@@ -53,7 +59,8 @@ def test_the_records_report_names_a_folder_without_records(tmp_path):
     with pytest.raises(ReportError, match=r"records\.json"):
         write_records_report(tmp_path)
     (tmp_path / "records.json").write_text('{"format": "other/1"}')
-    with pytest.raises(ReportError, match="field 'format'"):
+    with pytest.raises(BayesAmbError, match="field format: expected "
+                                            "'bayes-amb-diagnosis-records/1'"):
         write_records_report(tmp_path)
 
 

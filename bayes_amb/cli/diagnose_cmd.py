@@ -178,28 +178,30 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -> int:
     from bayes_amb.discrepancy.records import diagnose_records
+    from bayes_amb.report.records import write_records_report
     r = diagnose_records(recs, args.params, priors, opt)
     r.save(args.out)
+    write_records_report(args.out)
     d = to_jsonable(r.to_dict())
     lines = [f"record {i}: {v} ({s})" for i, (v, s) in
-             enumerate(zip(d["verdicts"], d["recordings"], strict=True), 1)]
-    for row in d["across"]:
+             enumerate(zip(r.verdicts, r.recordings, strict=True), 1)]
+    for row in r.across:
         bf = ", ".join(f"record {k}: " + (f"{v:.1f}" if v is not None else
-                                           "no gain" if row["present"][k] is False
+                                           "no gain" if row.present[k] is False
                                            else "not tested")
-                       for k, v in row["log_bayes_factor"].items())
-        if row["named_in"]:
-            where = f"named in record(s) {','.join(map(str, row['named_in']))}"
+                       for k, v in row.log_bayes_factor.items())
+        if row.named_in:
+            where = f"named in record(s) {','.join(map(str, row.named_in))}"
         else:
-            odds = row["joint_log_posterior_odds"]
-            where = (("named by the records together" if row["named_jointly"] else
+            odds = row.joint_log_posterior_odds
+            where = (("named by the records together" if row.named_jointly else
                       "not named, even by the records together")
                      + " (joint log posterior odds "
                      + (f"{odds:.1f})" if odds is not None else "not computed)"))
-        lines.append(f"{row['effect']}: {where}; log Bayes factor {bf}; "
-                     + ("present in every record" if row["in_every_record"]
+        lines.append(f"{row.effect}: {where}; log Bayes factor {bf}; "
+                     + ("present in every record" if row.in_every_record
                         else "NOT in every record")
-                     + (f"; size: {row['size']['reading']}" if row.get("size") else ""))
+                     + (f"; size: {row.size['reading']}" if row.size else ""))
     emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json, {args.out}/records.html "
          f"and {args.out}/record_<i>/", args.json)
     return 0

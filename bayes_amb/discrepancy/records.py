@@ -34,8 +34,7 @@ record, and only when the screens point somewhere.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from pathlib import Path
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -48,38 +47,9 @@ from bayes_amb.discrepancy.select import NODE_FREE, posterior_log_odds, try_cand
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.priors import Prior
-from bayes_amb.io.atomic import write_text_atomic
-from bayes_amb.io.nonfinite import result_json_text
 from bayes_amb.io.recording import Recording
 from bayes_amb.results.diagnosis import CandidateScore, Diagnosis, Explanation
-
-
-@dataclass
-class RecordsDiagnosis:
-    """Each record's Diagnosis and ``across``: per effect named anywhere, where it was named
-    and its log Bayes factor in every record."""
-
-    diagnoses: list[Diagnosis]
-    across: list[dict[str, Any]]
-    sources: list[str]
-    speeds_rpm: list[float] = field(default_factory=list)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"format": "bayes-amb-diagnosis-records/1", "recordings": self.sources,
-                "speeds_rpm": self.speeds_rpm,
-                "verdicts": [d.verdict for d in self.diagnoses],
-                "across": self.across}
-
-    def save(self, out_dir: str | Path) -> Path:
-        """OUT/record_<i>/ (each record's diagnosis files), OUT/records.json and the
-        report page OUT/records.html (report/records.py)."""
-        from bayes_amb.report.records import write_records_report
-        d = Path(out_dir)
-        for i, dg in enumerate(self.diagnoses, 1):
-            dg.save(d / f"record_{i}")
-        write_text_atomic(d / "records.json", result_json_text(self.to_dict()))
-        write_records_report(d)
-        return d
+from bayes_amb.results.records import FILE, RecordsDiagnosis
 
 
 def _size_of(e: Explanation, d: Diagnosis) -> dict[str, Any]:
@@ -257,7 +227,10 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         row["size"] = size_agreement(key, sizes, speeds)
         across.append(row)
     across += joint_search(diags, set(named), priors, opt, speeds)
-    return RecordsDiagnosis(diags, across, [str(r.source) for r in recordings], speeds)
+    result = RecordsDiagnosis.from_dict(
+        {"recordings": [str(r.source) for r in recordings], "speeds_rpm": speeds,
+         "verdicts": [d.verdict for d in diags], "across": across}, FILE)
+    return replace(result, diagnoses=diags)
 
 
 SIZE_QUANTITIES = {"unbalance": ("u_kgm", "u_*"), "runout": ("amplitude_m",),

@@ -4,7 +4,8 @@
     write_records_report("runs/speeds")          # after diagnose REC1 REC2 ... --out runs/speeds
 
 It reads what ``diagnose REC1 REC2 ... --out DIR`` wrote (DIR/records.json and each
-DIR/record_<i>/diagnosis.json) and shows, without recomputing anything estimated:
+DIR/record_<i>/diagnosis.json, as bayes_amb.results.records.RecordsDiagnosis) and shows,
+without recomputing anything estimated:
 
 - each record's verdict, fit (NRMSE before and after) and adequacy line;
 - every effect across the records: where it was named, its log Bayes factor in each
@@ -27,77 +28,74 @@ from bayes_amb import __version__
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.report import figures as fg
-from bayes_amb.report.collect import ReportError, _read_json
+from bayes_amb.report.collect import ReportError
 from bayes_amb.report.render import render_html
 from bayes_amb.report.sections import Section, Table, g
+from bayes_amb.results.diagnosis import Diagnosis
 
 __all__ = ["collect_records", "records_sections", "write_records_report"]
 
-RECORDS_FORMAT = "bayes-amb-diagnosis-records/1"
+def collect_records(run_dir: str | Path) -> Any:
+    """The typed diagnosis across records of a run folder (records.json and each
+    record_<i>/), as :class:`bayes_amb.results.records.RecordsDiagnosis`."""
+    from bayes_amb.results.records import RecordsDiagnosis
 
-
-def collect_records(run_dir: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """records.json and the records' diagnosis.json files of a run folder."""
     d = Path(run_dir)
-    result = _read_json(d / "records.json",
-                        "records (bayes-amb diagnose REC1 REC2 ... --out DIR writes them)")
-    if result.get("format") != RECORDS_FORMAT:
-        raise ReportError(f"{d / 'records.json'}: field 'format' is "
-                          f"{result.get('format')!r}, expected {RECORDS_FORMAT!r}")
-    reports = [_read_json(d / f"record_{i}" / "diagnosis.json", "record diagnosis")
-               for i in range(1, len(result["recordings"]) + 1)]
-    return result, reports
+    if not (d / "records.json").is_file():
+        raise ReportError(f"records {d / 'records.json'}: not found (bayes-amb diagnose "
+                          "REC1 REC2 ... --out DIR writes them)")
+    return RecordsDiagnosis.load(d)
 
 
-def _records_table(result: dict[str, Any], reports: list[dict[str, Any]]) -> Table:
-    speeds = result.get("speeds_rpm") or [None] * len(reports)
+def _final_adequacy(r: Diagnosis) -> Any:
+    return r.adequacy_after or r.adequacy
+
+
+def _records_table(result: Any) -> Table:
+    reports = result.diagnoses
+    speeds = result.speeds_rpm or [None] * len(reports)
     rows = []
     for i, (r, rpm) in enumerate(zip(reports, speeds, strict=True), 1):
-        fit = r.get("fit", {})
-        before = max(fit.get("before", {}).get("nrmse", {}).values(), default=np.nan)
-        after = max(fit.get("after", {}).get("nrmse", {}).values(), default=np.nan)
-        named = ", ".join(f"{e['effect']}@{e['location']}" for e in r["explanations"]) or "–"
-        rows.append([str(i), Path(str(r.get("recording", "?"))).name,
-                     "–" if rpm is None else g(rpm, 5), r["verdict"], named,
-                     f"{g(before, 3)} → {g(after, 3)}",
-                     "adequate" if _adequacy(r).get("adequate") else "NOT adequate"])
+        before = max(r.fit.before.nrmse.values(), default=np.nan)
+        after = max(r.fit.after.nrmse.values(), default=np.nan)
+        named = ", ".join(e.key for e in r.explanations) or "–"
+        ad = _final_adequacy(r)
+        rows.append([str(i), Path(r.recording).name, "–" if rpm is None else g(rpm, 5),
+                     r.verdict, named, f"{g(before, 3)} → {g(after, 3)}",
+                     "adequate" if ad is not None and ad.adequate else "NOT adequate"])
+    doubted = any(_final_adequacy(r) is not None and not _final_adequacy(r).adequate
+                  for r in reports)
     return Table("Each record's diagnosis", ["#", "file", "rpm", "verdict",
                                              "named", "NRMSE before → after",
                                              "final model"], rows,
                  "NRMSE: the residual's RMS over eps's, the worst of the four channels."
                  + (" Why a final model is not adequate: listed above the table."
-                    if any(not _adequacy(r).get("adequate", True) for r in reports)
-                    else ""), wrap=(1, 4))
+                    if doubted else ""), wrap=(1, 4))
 
 
-def _adequacy(r: dict[str, Any]) -> dict[str, Any]:
-    return r.get("adequacy_after") or r.get("adequacy") or {}
-
-
-def _bf(row: dict[str, Any], k: str) -> str:
-    v = row["log_bayes_factor"][k]
+def _bf(row: Any, k: str) -> str:
+    v = row.log_bayes_factor[k]
     if v is not None:
         return g(v, 3)
-    return "no gain" if row["present"].get(k) is False else "not tested"
+    return "no gain" if row.present.get(k) is False else "not tested"
 
 
-def _across_table(result: dict[str, Any]) -> Table | None:
-    if not result["across"]:
+def _across_table(result: Any) -> Table | None:
+    if not result.across:
         return None
     rows = []
-    for row in result["across"]:
-        bfs = "; ".join(f"{k}: {_bf(row, k)}" for k in row["log_bayes_factor"])
-        if row["named_in"]:
-            where = "record " + ", ".join(map(str, row["named_in"]))
-        elif row.get("named_jointly"):
+    for row in result.across:
+        bfs = "; ".join(f"{k}: {_bf(row, k)}" for k in row.log_bayes_factor)
+        if row.named_in:
+            where = "record " + ", ".join(map(str, row.named_in))
+        elif row.named_jointly:
             where = "the records together"
         else:
             where = "nowhere (joint search)"
-        joint = row.get("joint_log_posterior_odds")
-        size = row.get("size")
-        rows.append([row["effect"], where, bfs, "–" if joint is None else g(joint, 3),
-                     "yes" if row["in_every_record"] else "no",
-                     size["reading"] if size else "–"])
+        joint = row.joint_log_posterior_odds
+        rows.append([row.effect, where, bfs, "–" if joint is None else g(joint, 3),
+                     "yes" if row.in_every_record else "no",
+                     row.size["reading"] if row.size else "–"])
     return Table("Effects across the records", ["effect", "named by", "log BF per record",
                                                 "joint log posterior odds",
                                                 "in every record", "size across records"],
@@ -107,25 +105,23 @@ def _across_table(result: dict[str, Any]) -> Table | None:
                  wrap=(2, 5))
 
 
-def _coefficients(reports: list[dict[str, Any]]
-                  ) -> tuple[list[str], dict[str, list[dict[str, Any] | None]]]:
-    names = [n for n in reports[0].get("parameters_after", {})
-             if all(n in r.get("parameters_after", {}) for r in reports)]
-    return names, {n: [r["parameters_after"].get(n) for r in reports] for n in names}
+def _coefficients(reports: list[Diagnosis]) -> tuple[list[str], dict[str, list[Any]]]:
+    names = [n for n in reports[0].parameters_after
+             if all(n in r.parameters_after for r in reports)]
+    return names, {n: [r.parameters_after[n] for r in reports] for n in names}
 
 
-def _shared_table(reports: list[dict[str, Any]]) -> tuple[Table | None, dict[str, Any]]:
+def _shared_table(reports: list[Diagnosis]) -> tuple[Table | None, dict[str, Any]]:
     names, per = _coefficients(reports)
     if not names:
         return None, {}
-    means = {n: [v["mean"] for v in per[n]] for n in names}
-    sds = {n: [v["sd"] for v in per[n]] for n in names}
+    means = {n: [v.mean for v in per[n]] for n in names}
+    sds = {n: [v.sd for v in per[n]] for n in names}
     test = agreement(means, sds)
     rows = []
     for n in names:
         t = test["parameters"].get(n)
-        cells = [f"{g(v['mean'], 3)} [{g(v['hdi90'][0], 3)}, {g(v['hdi90'][1], 3)}]"
-                 for v in per[n]]
+        cells = [f"{g(v.mean, 3)} [{g(v.hdi90[0], 3)}, {g(v.hdi90[1], 3)}]" for v in per[n]]
         verdict = ("–" if t is None else
                    "DISAGREE" if n in test["disagree"] else "agree")
         rows.append([n, *cells, "–" if t is None else g(t["p_adjusted"], 2), verdict])
@@ -138,7 +134,7 @@ def _shared_table(reports: list[dict[str, Any]]) -> tuple[Table | None, dict[str
                  wrap=tuple(range(1, len(reports) + 1))), test
 
 
-def _forest(reports: list[dict[str, Any]], speeds: list[float | None]
+def _forest(reports: list[Diagnosis], speeds: list[float | None]
             ) -> fg.ReportFigure | None:
     import matplotlib.pyplot as plt
     names, per = _coefficients(reports)
@@ -150,11 +146,11 @@ def _forest(reports: list[dict[str, Any]], speeds: list[float | None]
     for j, n in enumerate(names):
         for i, v in enumerate(per[n]):
             y = j + (i - (n_rec - 1) / 2) * 0.8 / max(n_rec, 2)
-            ax.plot(v["hdi90"], [y, y], color=colours[i % len(colours)], lw=2.2,
+            ax.plot(v.hdi90, [y, y], color=colours[i % len(colours)], lw=2.2,
                     label=(f"record {i + 1}" + ("" if speeds[i] is None
                                                  else f" ({speeds[i]:.0f} rpm)"))
                     if j == 0 else None)
-            ax.plot([v["mean"]], [y], "o", color=colours[i % len(colours)], ms=4)
+            ax.plot([v.mean], [y], "o", color=colours[i % len(colours)], ms=4)
     ax.set_yticks(range(len(names)), names)
     ax.invert_yaxis()
     ax.axvline(0.0, color="0.6", lw=0.8)
@@ -170,18 +166,18 @@ def _forest(reports: list[dict[str, Any]], speeds: list[float | None]
     return out
 
 
-def records_sections(result: dict[str, Any], reports: list[dict[str, Any]]
-                     ) -> list[Section]:
-    """The report's sections: the records, the effects across them, what they share."""
+def records_sections(result: Any) -> list[Section]:
+    """The report's sections: the records, the effects across them, what they share
+    (``result``: a RecordsDiagnosis with its records' diagnoses)."""
+    reports = result.diagnoses
     shared, test = _shared_table(reports)
     n = len(reports)
-    verdicts = ", ".join(f"{v} ({sum(r['verdict'] == v for r in reports)})"
-                         for v in dict.fromkeys(r["verdict"] for r in reports))
-    jointly = [row["effect"] for row in result["across"] if row.get("named_jointly")]
+    verdicts = ", ".join(f"{v} ({sum(r.verdict == v for r in reports)})"
+                         for v in dict.fromkeys(r.verdict for r in reports))
+    jointly = [row.effect for row in result.across if row.named_jointly]
     lines = [f"{n} records diagnosed, each with its own model, noise and speed: {verdicts}."]
-    every = [row["effect"] for row in result["across"] if row["in_every_record"]]
-    some = [row["effect"] for row in result["across"]
-            if row["named_in"] and not row["in_every_record"]]
+    every = [row.effect for row in result.across if row.in_every_record]
+    some = [row.effect for row in result.across if row.named_in and not row.in_every_record]
     if every:
         lines.append("Present in every record (a property of the machine): "
                      + ", ".join(every) + ".")
@@ -193,16 +189,16 @@ def records_sections(result: dict[str, Any], reports: list[dict[str, Any]]
                      "evidence): " + ", ".join(jointly) + ".")
     if test:
         lines.append(test["line"][:1].upper() + test["line"][1:] + ".")
-    doubted = [f"Record {i}: {_adequacy(r)['line']}" for i, r in enumerate(reports, 1)
-               if not _adequacy(r).get("adequate", True)]
+    doubted = [f"Record {i}: {_final_adequacy(r).line}" for i, r in enumerate(reports, 1)
+               if _final_adequacy(r) is not None and not _final_adequacy(r).adequate]
     summary = Section("summary", "Summary", paragraphs=lines, bullets=doubted,
-                      tables=[_records_table(result, reports)])
+                      tables=[_records_table(result)])
     across = _across_table(result)
     sections = [summary]
     if across is not None:
         sections.append(Section("across", "Effects across the records", tables=[across]))
     if shared is not None:
-        fig = _forest(reports, result.get("speeds_rpm") or [None] * n)
+        fig = _forest(reports, result.speeds_rpm or [None] * n)
         sections.append(Section("shared", "What the records share",
                                 tables=[shared], figures=[fig] if fig else []))
     return sections
@@ -211,8 +207,9 @@ def records_sections(result: dict[str, Any], reports: list[dict[str, Any]]
 def write_records_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Path:
     """Write OUT/records.html (OUT defaults to the run folder) for a run folder of
     ``diagnose REC1 REC2 ... --out DIR``; returns its path."""
-    result, reports = collect_records(run_dir)
-    sections = records_sections(result, reports)
+    result = collect_records(run_dir)
+    reports = result.diagnoses
+    sections = records_sections(result)
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     meta = {"title": f"Diagnosis across {len(reports)} records",
             "subtitle": f"Run folder {Path(run_dir).name}; made {now} by bayes-amb "

@@ -23,9 +23,10 @@ from bayes_amb.results.diagnosis import (
 )
 from bayes_amb.results.engineering import Answer, EngineeringAnswers
 from bayes_amb.results.identification import Identification, Noise, Posterior, RecordFit
+from bayes_amb.results.records import AcrossRow, RecordsDiagnosis
 from bayes_amb.results.study import Study
 
-__all__ = ["Adequacy", "Answer", "Balancing", "Block", "CandidateScore", "Check",
+__all__ = ["AcrossRow", "Adequacy", "Answer", "Balancing", "Block", "CandidateScore", "Check",
            "Coefficient", "Diagnosis", "EffectFit", "EngineeringAnswers", "Estimate",
            "Explanation", "Identification", "Mismatch", "Noise", "Posterior", "RecordFit",
-           "Study", "Unexplained"]
+           "RecordsDiagnosis", "Study", "Unexplained"]

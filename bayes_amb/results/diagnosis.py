@@ -17,7 +17,7 @@ the run folder holds (``residuals``, ``models``).
 
 from __future__ import annotations
 
-from dataclasses import field
+from dataclasses import field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
@@ -404,12 +404,5 @@ class Diagnosis(Block):
         out = cls.from_dict(data, str(d / FILE))
         res = d / "residuals.nc"
         models = {p.stem: xr.load_dataset(p) for p in sorted((d / "models").glob("*.nc"))}
-        return _with(out, residuals=xr.load_dataset(res) if res.is_file() else None,
-                     models=models)
-
-
-def _with(obj: Any, **kw: Any) -> Any:
-    """A copy of a frozen block with runtime fields set (extra and nulls kept)."""
-    import dataclasses
-
-    return dataclasses.replace(obj, **kw)
+        return replace(out, residuals=xr.load_dataset(res) if res.is_file() else None,
+                       models=models)

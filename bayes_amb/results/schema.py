@@ -19,12 +19,15 @@ from bayes_amb.results.engineering import FORMAT as ENGINEERING_FORMAT
 from bayes_amb.results.engineering import EngineeringAnswers
 from bayes_amb.results.identification import FORMAT as IDENTIFICATION_FORMAT
 from bayes_amb.results.identification import Identification
+from bayes_amb.results.records import FORMAT as RECORDS_FORMAT
+from bayes_amb.results.records import RecordsDiagnosis
 from bayes_amb.results.study import FORMAT as STUDY_FORMAT
 from bayes_amb.results.study import Study
 
 FILES = ((Diagnosis, "diagnosis.json", DIAGNOSIS_FORMAT),
          (Identification, "summary.json", IDENTIFICATION_FORMAT),
          (EngineeringAnswers, "answers.json", ENGINEERING_FORMAT),
+         (RecordsDiagnosis, "records.json", RECORDS_FORMAT),
          (Study, "study.json", STUDY_FORMAT))
 
 
