@@ -191,7 +191,7 @@ def run(out: Path, groups: dict[str, int], seed: int, levels: bool = False) -> N
                    "adequate": res.adequacy.adequate,
                    "records_adequate": [r.adequacy is None or r.adequacy.adequate
                                         for r in res.records],
-                   "disagree": (res.agreement or {}).get("disagree", []),
+                   "disagree": res.agreement.disagree if res.agreement else [],
                    **score(summary, truth["theta"])}
             append_row(rows_path, row)
             inside = sum(v["inside"] for v in row["joint"].values())

@@ -38,7 +38,7 @@ def test_an_effect_named_in_one_record_is_tested_in_all(recs, tmp_path):
     assert row.present["1"] and row.present["2"]         # the physics is there
     assert row.present["3"] is False                    # and not in the clean record
     assert not row.in_every_record
-    assert row.size["records"] == [1, 2] and row.size["agree"]   # one kxy in both
+    assert row.size.records == [1, 2] and row.size.agree   # one kxy in both
     r.save(tmp_path)
     write_records_report(tmp_path)
     saved = json.loads((tmp_path / "records.json").read_text())

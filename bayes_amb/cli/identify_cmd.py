@@ -117,8 +117,8 @@ def format_joint(s: Identification) -> str:
         noise = ", ".join(f"{k} {v.value:.3g} {v.unit}" for k, v in r.noise.items())
         lines.append(f"record {i}: {r.recording}, {r.speed_rpm:g} rpm, dt {r.dt:g} s; "
                      f"noise {noise}")
-    if s.agreement is not None and not s.agreement["disagree"]:
-        lines.append(f"agreement: {s.agreement['line']}")
+    if s.agreement is not None and not s.agreement.disagree:
+        lines.append(f"agreement: {s.agreement.line}")
     if s.adequacy is not None:
         lines.append(f"adequacy: {s.adequacy.line}")
     return "\n".join(lines)

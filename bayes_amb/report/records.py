@@ -95,7 +95,7 @@ def _across_table(result: Any) -> Table | None:
         joint = row.joint_log_posterior_odds
         rows.append([row.effect, where, bfs, "–" if joint is None else g(joint, 3),
                      "yes" if row.in_every_record else "no",
-                     row.size["reading"] if row.size else "–"])
+                     row.size.reading if row.size else "–"])
     return Table("Effects across the records", ["effect", "named by", "log BF per record",
                                                 "joint log posterior odds",
                                                 "in every record", "size across records"],

@@ -176,6 +176,34 @@ class EffectFit(Block):
 
 
 @block
+class ParameterAgreement(Block):
+    """Cochran's Q of one parameter's estimates across records, Holm-adjusted p, the
+    between-record sd tau and the random-effects mean and sd (inference/consistency.py)."""
+
+    Q: float
+    dof: int
+    p: float
+    p_adjusted: float | None = omitted()
+    tau: float
+    random_effects_mean: float
+    random_effects_sd: float
+    record_means: list[float]
+    record_sds: list[float]
+
+
+@block
+class Agreement(Block):
+    """Whether several records agree on what they share: the test, its level, per
+    parameter its statistics, the parameters they disagree on, in one line."""
+
+    test: str
+    alpha: float
+    parameters: dict[str, ParameterAgreement]
+    disagree: list[str]
+    line: str
+
+
+@block
 class Explanation(EffectFit):
     """An effect the diagnosis named, with its evidence."""
 

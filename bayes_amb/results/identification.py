@@ -22,7 +22,7 @@ import numpy as np
 
 from bayes_amb.errors import BayesAmbError, ResultError
 from bayes_amb.results.blocks import Block, block, omitted, runtime
-from bayes_amb.results.diagnosis import Adequacy
+from bayes_amb.results.diagnosis import Adequacy, Agreement
 from bayes_amb.results.files import read_result, require_format, write_result
 
 if TYPE_CHECKING:
@@ -150,7 +150,7 @@ class Identification(Block):
     converged: bool
     sampler: Sampler | None = omitted()
     identifiability: dict[str, Any] | None = omitted()
-    agreement: dict[str, Any] | None = omitted()
+    agreement: Agreement | None = omitted()
     inference_note: str | None = omitted()
     parameters_model_only: dict[str, Posterior] | None = omitted()
     parameters_from: str | None = omitted()

@@ -16,14 +16,25 @@ from __future__ import annotations
 
 from dataclasses import field, replace
 from pathlib import Path
-from typing import Any, Self
+from typing import Self
 
 from bayes_amb.results.blocks import Block, block, omitted, runtime
-from bayes_amb.results.diagnosis import Diagnosis
+from bayes_amb.results.diagnosis import Agreement, Diagnosis
 from bayes_amb.results.files import read_result, require_format, write_result
 
 FORMAT = "bayes-amb-diagnosis-records/1"
 FILE = "records.json"
+
+
+@block
+class SizeAgreement(Block):
+    """Whether an effect fitted in several records has the same size in each: the records,
+    the agreement test of its size quantities, and the reading (discrepancy/records.py)."""
+
+    records: list[int]
+    test: Agreement
+    agree: bool
+    reading: str
 
 
 @block
@@ -42,7 +53,7 @@ class AcrossRow(Block):
     joint_log_posterior_odds: float | None = omitted()
     named_jointly: bool | None = omitted()
     in_every_record: bool
-    size: dict[str, Any] | None = None
+    size: SizeAgreement | None = None
 
 
 @block
