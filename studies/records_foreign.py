@@ -7,7 +7,9 @@ options. Scored here, the only place the truth is read:
 
 - the group's names: every physics effect named with confidence in at least one record,
   or named by the records together (records.joint_search), whose size, where it was
-  fitted in two or more records, agrees across them (records.py);
+  fitted in two or more records, agrees across them (records.py), and which is not a place
+  the records favour less than another for the same effect by more than 3 nats
+  (records.prefer_locations);
   right when it names the truth's effect (benchmarks/foreign/benchmark.accepted_names);
 - clean: an effect-free group whose records all end as "no mismatch" with no name;
 - per record: whether that record alone named the truth (a group where one record alone
@@ -49,6 +51,11 @@ def _keys(key: str) -> set[str]:
     return {key, key.split("@")[0] + "@*"}
 
 
+THRESHOLD = 3.0
+"""A place the records favour less by more than this (summed log BF, nats; the search's
+threshold) is not the group's name for the effect (records.prefer_locations)."""
+
+
 def group_names(result: dict[str, Any], reports: list[dict[str, Any]]) -> list[str]:
     """The group's names (module doc) from records.json and the records' diagnoses."""
     confident = {f"{e['effect']}@{e['location']}" for r in reports for e in r["explanations"]
@@ -56,7 +63,8 @@ def group_names(result: dict[str, Any], reports: list[dict[str, Any]]) -> list[s
                  and e.get("confidence") == "confident"}
     return [row["effect"] for row in result["across"]
             if (row["effect"] in confident or row.get("named_jointly"))
-            and (row.get("size") is None or row["size"]["agree"])]
+            and (row.get("size") is None or row["size"]["agree"])
+            and not (row.get("weaker_by") or 0.0) > THRESHOLD]
 
 
 def score(truth: dict[str, Any], result: dict[str, Any], reports: list[dict[str, Any]]

@@ -147,3 +147,25 @@ def test_the_joint_search_discounts_the_occam_factor_its_records_show(monkeypatc
                                        screen_gain=6.0, log_bayes_factor=1.0))
     assert records.joint_search([d] * 3, set(), None, DiagnoseOptions(),
                                 [2e4, 2.5e4, 3e4]) == []
+
+
+def test_the_records_prefer_the_place_they_favour_together():
+    """A foreign group (records_weak, cross_coupling_01): a cross-coupling at A named in the
+    two faster records, at D1 in the slowest, where the two places are 0.2 nats apart; over
+    the three records A leads by 36 nats, so the records prefer A. An unbalance's node is
+    not physics and is left alone; an effect named at one place only gets nothing."""
+    from bayes_amb.discrepancy.records import prefer_locations
+
+    def row(key, named_in, lbfs):
+        return {"effect": key, "named_in": named_in, "present": {},
+                "log_bayes_factor": dict(zip(("1", "2", "3"), lbfs, strict=True))}
+    across = [row("cross_coupling@A", [1, 2], [32.3, 225.0, 7.1]),
+              row("cross_coupling@D1", [3], [26.7, 194.1, 7.3]),
+              row("unbalance@n14", [1], [20.0, 30.0, 40.0]),
+              row("unbalance@D2", [2], [25.0, 35.0, 45.0]),
+              row("runout@Ax", [1], [9.0, None, 4.0])]
+    prefer_locations(across)
+    a, d1, n14, d2, runout = across
+    assert a["preferred_location"] == d1["preferred_location"] == "cross_coupling@A"
+    assert "weaker_by" not in a and d1["weaker_by"] == pytest.approx(36.3)
+    assert not {"preferred_location", "weaker_by"} & (set(n14) | set(d2) | set(runout))

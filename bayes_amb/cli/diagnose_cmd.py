@@ -201,7 +201,9 @@ def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -
         lines.append(f"{row.effect}: {where}; log Bayes factor {bf}; "
                      + ("present in every record" if row.in_every_record
                         else "NOT in every record")
-                     + (f"; size: {row.size.reading}" if row.size else ""))
+                     + (f"; size: {row.size.reading}" if row.size else "")
+                     + (f"; the records prefer {row.preferred_location} (by "
+                        f"{row.weaker_by:.1f} nats)" if row.weaker_by is not None else ""))
     emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json, {args.out}/records.html "
          f"and {args.out}/record_<i>/", args.json)
     return 0

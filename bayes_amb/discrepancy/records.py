@@ -227,10 +227,37 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
         row["size"] = size_agreement(key, sizes, speeds)
         across.append(row)
     across += joint_search(diags, set(named), priors, opt, speeds)
+    prefer_locations(across)
     result = RecordsDiagnosis.from_dict(
         {"recordings": [str(r.source) for r in recordings], "speeds_rpm": speeds,
          "verdicts": [d.verdict for d in diags], "across": across}, FILE)
     return replace(result, diagnoses=diags)
+
+
+def prefer_locations(across: list[dict[str, Any]]) -> None:
+    """Where the records named one effect at several places (a cross-coupling at A in two
+    records, at D1 in the third), the place the records favour together is the one whose
+    log Bayes factor, summed over the records both were tested in, is the larger: each
+    such row gets ``preferred_location`` (that row's key), and the others ``weaker_by``
+    (nats below it). One record may prefer the wrong place by a few nats where the two
+    are nearly equivalent at its speed; the records together tell them apart. An effect
+    whose place is not physics (NODE_FREE: an unbalance's node) is left alone."""
+    by_effect: dict[str, list[dict[str, Any]]] = {}
+    for row in across:
+        effect = row["effect"].split("@")[0]
+        if effect not in NODE_FREE and (row["named_in"] or row.get("named_jointly")):
+            by_effect.setdefault(effect, []).append(row)
+    for rows in by_effect.values():
+        common = set.intersection(*({k for k, v in r["log_bayes_factor"].items()
+                                     if v is not None} for r in rows))
+        if len(rows) < 2 or not common:
+            continue
+        total = {r["effect"]: sum(r["log_bayes_factor"][k] for k in common) for r in rows}
+        best = max(total, key=total.__getitem__)
+        for r in rows:
+            r["preferred_location"] = best
+            if r["effect"] != best:
+                r["weaker_by"] = float(total[best] - total[r["effect"]])
 
 
 SIZE_QUANTITIES = {"unbalance": ("u_kgm", "u_*"), "runout": ("amplitude_m",),

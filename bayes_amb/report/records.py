@@ -93,6 +93,9 @@ def _across_table(result: Any) -> Table | None:
         else:
             where = "nowhere (joint search)"
         joint = row.joint_log_posterior_odds
+        if row.weaker_by is not None:
+            where += (f"; the records prefer {row.preferred_location} "
+                      f"(by {g(row.weaker_by, 3)} nats)")
         rows.append([row.effect, where, bfs, "–" if joint is None else g(joint, 3),
                      "yes" if row.in_every_record else "no",
                      row.size.reading if row.size else "–"])
@@ -101,7 +104,9 @@ def _across_table(result: Any) -> Table | None:
                                                 "in every record", "size across records"],
                  rows, "An effect named in one record is tested alone in every other; the "
                        "joint search fits what the records' screens point to together and "
-                       "adds its log Bayes factors (prior odds 1/K, threshold 3).",
+                       "adds its log Bayes factors (prior odds 1/K, threshold 3). An effect "
+                       "named at several places: the records prefer the place with the "
+                       "larger summed log Bayes factor.",
                  wrap=(2, 5))
 
 

@@ -42,7 +42,9 @@ class AcrossRow(Block):
     """One effect across the records: where it was named, its log Bayes factor and
     presence in each record (keys: record numbers from 1; None: not tested), whether it is
     in every record, and its size's agreement; a row of the joint search also has the
-    summed screens and the joint evidence."""
+    summed screens and the joint evidence. Where the records named the effect at several
+    places, ``preferred_location`` is the one they favour together and ``weaker_by`` how
+    far (summed log BF, nats) this place falls below it."""
 
     effect: str
     named_in: list[int]
@@ -54,6 +56,8 @@ class AcrossRow(Block):
     named_jointly: bool | None = omitted()
     in_every_record: bool
     size: SizeAgreement | None = None
+    preferred_location: str | None = omitted()
+    weaker_by: float | None = omitted()
 
 
 @block
