@@ -3,11 +3,11 @@
 For each effect-free foreign record of a benchmark run (benchmarks/foreign/benchmark.py with
 --identify), the plan is made as a user with that rig would make it: the record's rig,
 controller, speed and dt, its excitation (a random binary of the record's amplitude at its
-port, its length), and its noise as `--noise-from` takes it (planning.noise_from: the white
-intensities identify fits on it and the colour of its residual; --white: the intensities
-alone, as before the colour). The predicted posterior sd is compared with the sd identify
-reported on that record, and the estimates' errors (truth read only here) with the
-predicted spread of the estimates.
+port, on the channels it excites, its length), and its noise as `--noise-from` takes it
+(planning.noise_from: the white intensities identify fits on it and the colour of its
+residual; --white: the intensities alone, as before the colour). The predicted posterior
+sd is compared with the sd identify reported on that record, and the estimates' errors
+(truth read only here) with the predicted spread of the estimates.
 
     PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force
 """
@@ -35,8 +35,11 @@ def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False
         rec = load_recording(run / "recordings" / f"{name}.csv")
         x = next(iter(rec.excitation.values()))
         n = s["noise"]["map"]
+        live = tuple(c for c, v in zip(("Ax", "Ay", "Bx", "By"), np.abs(x).max(axis=0),
+                                       strict=True) if v > 0)
         design = Design(excitation="random-binary", amplitude=float(np.max(np.abs(x))),
-                        duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"])
+                        duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"],
+                        channels=None if len(live) == 4 else live)
         noise = (Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
                        r2_rms=n["sigma_r2"]["value"]) if white else noise_from(rec))
         at = s["map"] if at_map else None     # the user's estimate from that record

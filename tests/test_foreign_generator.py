@@ -147,6 +147,17 @@ def test_offsets_give_a_steady_dc_shift(controller_file):
     assert np.allclose(sig["m"].mean(0), off, rtol=1e-12)
 
 
+def test_one_channel_excitation_changes_no_other_draw():
+    """A one-channel test (kind control_one_channel) excites one channel; the others are
+    drawn and zeroed, so every other signal is the four-channel record's, draw for draw."""
+    h = Habits(noise_rms_m=5e-8)
+    all4, _ = habit_signals(h, 2000, 1e-4, np.random.default_rng(3))
+    one, _ = habit_signals(replace(h, eta_channels=("Bx",)), 2000, 1e-4,
+                           np.random.default_rng(3))
+    assert np.array_equal(one["eta"][:, 2], all4["eta"][:, 2])
+    assert not one["eta"][:, [0, 1, 3]].any() and np.array_equal(one["m"], all4["m"])
+
+
 def test_record_starts_mid_operation(controller_file):
     from bayes_amb.inference.forward import ForwardModel
     from bayes_amb.inference.offline import dual_youla_eps

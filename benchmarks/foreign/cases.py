@@ -40,7 +40,7 @@ IN_FAMILY = tuple(n for n in EFFECT_PARAMS if n not in HELD_OUT)
 the held-out effects, 'held_out' (= 'pedestal'), 'full_truth' and 'bending')."""
 
 KINDS = ("control", "control_force", *IN_FAMILY, "pair", "held_out", *HELD_OUT,
-         "full_truth", "bending")
+         "full_truth", "bending", "control_one_channel")
 
 
 @dataclass(frozen=True)
@@ -328,7 +328,9 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
     """Draw a case of a kind (KINDS, or 'pair:<a>+<b>'): bearings off nominal, habits drawn,
     effects drawn at a first guess (scaled to concealment in [0.2, 1) by :func:`conceal`;
     a current limit's i_max by :func:`calibrate_current_limit`). 'control_force' is a
-    control with a process force at the discs (habits.draw_force, drawn last)."""
+    control with a process force at the discs (habits.draw_force, drawn last);
+    'control_one_channel' a control excited on one channel only (a test design, drawn
+    last)."""
     k_theta = {a: float(rng.uniform(-0.3, 0.3)) for a in AXES}
     c_nsm = {a: float(rng.uniform(0.0, 300.0)) for a in AXES}
     hab = draw_habits(rng, noise_rms_m) if habits else Habits(noise_rms_m=noise_rms_m)
@@ -337,6 +339,8 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
         pass
     elif kind == "control_force":
         hab = draw_force(hab, rng, load_rig().ki)
+    elif kind == "control_one_channel":
+        hab = replace(hab, eta_channels=(str(rng.choice(AXES)),))
     elif kind in IN_FAMILY or kind in HELD_OUT:
         effects = (_draw_effect(kind, rng, noise_rms_m, duration_s),)
     elif kind == "pair" or kind.startswith("pair:"):

@@ -13,7 +13,9 @@ All signals are sampled at the loop's dt over the whole simulation (burn-in incl
 - r1 (m, on the measurement) and r2 (A, at the plant input): white, unrecorded disturbances;
 - a burn-in (s) simulated with everything running before the record starts, so that the
   record begins mid-operation with non-zero plant and controller states;
-- the excitation eta: random binary +/-amplitude (A), independent per channel and sample;
+- the excitation eta: random binary +/-amplitude (A), independent per channel and sample
+  (on ``eta_channels`` only; the others drawn and then zeroed, so that the other draws do
+  not depend on it);
 - a process force (N) at the discs (aerodynamic / process forcing; unrecorded, like r2):
   Gaussian, band-limited by a 4th-order Butterworth band-pass to [f_lo, f_hi] Hz,
   independent per forced axis, each scaled to the rms ``force_rms_n`` over the whole run.
@@ -49,6 +51,7 @@ class Habits:
     force_rms_n: float = 0.0
     force_band_hz: tuple[float, float] = (10.0, 300.0)
     force_at: tuple[str, ...] = ()
+    eta_channels: tuple[str, ...] = ("Ax", "Ay", "Bx", "By")
 
     def to_dict(self) -> dict[str, Any]:
         d = asdict(self)
@@ -131,6 +134,7 @@ def habit_signals(h: Habits, n: int, dt: float, rng: np.random.Generator, t0: fl
     """
     t = t0 + np.arange(n) * dt
     eta = h.eta_amplitude_a * rng.choice([-1.0, 1.0], size=(n, 4))
+    eta[:, [c not in h.eta_channels for c in ("Ax", "Ay", "Bx", "By")]] = 0.0
     if h.noise_kind == "pink":
         noise = pink_noise(n, h.noise_rms_m, rng)
     elif h.noise_kind == "ar1":
