@@ -74,10 +74,6 @@ JOINT_FITS = 2
 """Candidates the joint search fits in every record (the best by summed screen gain)."""
 
 
-def _failed_check(d: Diagnosis) -> bool:
-    return d.checks_failed
-
-
 def _tested_in(d: Diagnosis, key: str, priors: dict[str, Prior] | None, seed: int,
                force: bool = False, parent: str = "nominal"
                ) -> tuple[float | None, dict[str, Any] | None, bool]:
@@ -127,7 +123,7 @@ def joint_search(diags: list[Diagnosis], named: set[str], priors: dict[str, Prio
     """Effects the records name together that none names alone (module docstring): one row
     per candidate fitted, with each record's log Bayes factor, the joint one, the joint log
     posterior odds and ``named_jointly``."""
-    usable = [i for i, d in enumerate(diags) if not _failed_check(d)]
+    usable = [i for i, d in enumerate(diags) if not d.checks_failed]
     if len(usable) < 2:
         return []
     gains: dict[str, list[float]] = {}
@@ -206,7 +202,7 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
                 e = next(e for e in d.explanations if e.key == key)
                 lbf = e.score
                 sizes[str(i + 1)] = _size_of(e, d)
-            elif _failed_check(d):
+            elif d.checks_failed:
                 lbf = None                              # a failed data check: not tested
             elif (same := _named_elsewhere(key, d)) is not None:
                 lbf = same.score                        # the same physics at another place

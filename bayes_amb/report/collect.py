@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import json
 import logging
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -25,10 +24,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bayes_amb.errors import BayesAmbError
-from bayes_amb.io.nonfinite import restore_non_finite
+from bayes_amb.errors import BayesAmbError, ResultError
 from bayes_amb.io.recording import Recording, load_recording, load_truth, recording_paths
 from bayes_amb.results.diagnosis import Diagnosis
+from bayes_amb.results.files import read_posterior, read_result
 from bayes_amb.results.identification import Identification
 from bayes_amb.results.study import FORMAT as STUDY_FORMAT
 from bayes_amb.results.study import Study
@@ -164,15 +163,11 @@ def _input(role: str, path: Path) -> InputFile:
 
 
 def _read_json(path: Path, what: str) -> dict[str, Any]:
+    """results.files.read_result, its error a ReportError led by ``what``."""
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ReportError(f"{what} {path}: not found") from None
-    except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-        raise ReportError(f"{what} {path}: not valid JSON ({exc})") from None
-    if not isinstance(data, dict):
-        raise ReportError(f"{what} {path}: expected a JSON object, got {type(data).__name__}")
-    return restore_non_finite(data)
+        return read_result(path)
+    except ResultError as exc:
+        raise ReportError(f"{what} {exc}") from None
 
 
 def _read_summary(run_dir: Path) -> Identification:
@@ -194,16 +189,11 @@ def _read_summary(run_dir: Path) -> Identification:
 
 
 def _read_posterior(path: Path) -> Any:
-    import arviz as az
-
+    """results.files.read_posterior, its error a ReportError."""
     try:
-        dt = az.from_netcdf(path)
-    except (OSError, ValueError) as exc:
-        raise ReportError(f"posterior {path}: cannot be read as ArviZ NetCDF ({exc})") from None
-    for group in ("posterior", "observed_data", "constant_data"):
-        if group not in dt.children:
-            raise ReportError(f"posterior {path}: group {group}: missing")
-    return dt.load()
+        return read_posterior(path)
+    except ResultError as exc:
+        raise ReportError(f"posterior {exc}") from None
 
 
 def _recording_candidates(summary_path: str, run_dir: Path) -> list[Path]:
@@ -257,10 +247,8 @@ def _read_study(path: Path) -> StudyData:
     if "conclusions" not in m:
         raise ReportError(f"study manifest {path / 'study.json'}: field conclusions: missing "
                           "(the study has not finished)")
-    if isinstance(m["conclusions"], str):
-        m["conclusions"] = [m["conclusions"]]
     st = Study.from_dict({"format": STUDY_FORMAT, "package_version": "?", "study": {},
-                          "cells": [], "seeds": {}, **m},
+                          "cells": [], "seeds": {}, **Study.upgrade(m)},
                          f"study manifest {path / 'study.json'}")
     rows: tuple[dict[str, str], ...] = ()
     if (path / "summary.csv").is_file():

@@ -25,7 +25,7 @@ import xarray as xr
 
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.results.blocks import Block, block, keyed, omitted, runtime
-from bayes_amb.results.files import read_result, require_format, write_result
+from bayes_amb.results.files import read_block, write_result
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -427,9 +427,7 @@ class Diagnosis(Block):
         when present). A folder without diagnosis.json, or a file of another format, is a
         one-line error naming it."""
         d = Path(run_dir)
-        data = read_result(d / FILE)
-        require_format(d / FILE, data, FORMAT)
-        out = cls.from_dict(data, str(d / FILE))
+        out = read_block(cls, d / FILE, FORMAT)
         res = d / "residuals.nc"
         models = {p.stem: xr.load_dataset(p) for p in sorted((d / "models").glob("*.nc"))}
         return replace(out, residuals=xr.load_dataset(res) if res.is_file() else None,

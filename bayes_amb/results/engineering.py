@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING, Self
 
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.results.blocks import Block, block, omitted
-from bayes_amb.results.files import read_result, require_format, write_result
+from bayes_amb.results.files import read_block, write_result
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -90,6 +90,4 @@ class EngineeringAnswers(Block):
         """The answers of a file, or of a run folder's answers.json."""
         p = Path(path)
         p = p / FILE if p.is_dir() else p
-        data = read_result(p)
-        require_format(p, data, FORMAT)
-        return cls.from_dict(data, str(p))
+        return read_block(cls, p, FORMAT)

@@ -31,6 +31,28 @@ def require_format(path: Path, data: dict[str, Any], expected: str) -> None:
         raise ResultError(f"{path}: field format: expected {expected!r}, got {got!r}")
 
 
+def read_block(cls: Any, path: Path, expected: str) -> Any:
+    """The block ``cls`` a result file holds: read (:func:`read_result`), its format
+    checked, older files brought up to date by ``cls.upgrade`` when it has one."""
+    data = read_result(path)
+    require_format(path, data, expected)
+    return cls.from_dict(getattr(cls, "upgrade", lambda d: d)(data), str(path))
+
+
+def read_posterior(path: Path) -> Any:
+    """An ArviZ NetCDF posterior (posterior.nc) with the groups identify writes, loaded."""
+    import arviz as az
+
+    try:
+        dt = az.from_netcdf(path)
+    except (OSError, ValueError) as exc:
+        raise ResultError(f"{path}: cannot be read as ArviZ NetCDF ({exc})") from None
+    for group in ("posterior", "observed_data", "constant_data"):
+        if group not in dt.children:
+            raise ResultError(f"{path}: group {group}: missing")
+    return dt.load()
+
+
 def read_rows(path: Path) -> list[dict[str, Any]]:
     """Rows of a .jsonl file (a study's results.jsonl); a torn last line (killed
     mid-write) is ignored; non-finite numbers put back."""

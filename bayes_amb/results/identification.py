@@ -20,10 +20,10 @@ from typing import TYPE_CHECKING, Any, Self
 
 import numpy as np
 
-from bayes_amb.errors import BayesAmbError, ResultError
+from bayes_amb.errors import BayesAmbError
 from bayes_amb.results.blocks import Block, block, omitted, runtime
 from bayes_amb.results.diagnosis import Adequacy, Agreement
-from bayes_amb.results.files import read_result, require_format, write_result
+from bayes_amb.results.files import read_block, read_posterior, write_result
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -215,17 +215,7 @@ class Identification(Block):
         import dataclasses
 
         d = Path(run_dir)
-        data = read_result(d / FILE)
-        require_format(d / FILE, data, FORMAT)
-        out = cls.from_dict(data, str(d / FILE))
-        post = None
-        if (d / "posterior.nc").is_file():
-            import arviz as az
-
-            try:
-                post = az.from_netcdf(d / "posterior.nc").load()
-            except (OSError, ValueError) as exc:
-                raise ResultError(f"{d / 'posterior.nc'}: cannot be read as ArviZ NetCDF "
-                                  f"({exc})") from None
+        out = read_block(cls, d / FILE, FORMAT)
+        post = read_posterior(d / "posterior.nc") if (d / "posterior.nc").is_file() else None
         return dataclasses.replace(out, posterior=post,
                                    names=tuple(out.parameters_estimated))

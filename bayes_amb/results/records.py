@@ -20,7 +20,7 @@ from typing import Self
 
 from bayes_amb.results.blocks import Block, block, omitted, runtime
 from bayes_amb.results.diagnosis import Agreement, Diagnosis
-from bayes_amb.results.files import read_result, require_format, write_result
+from bayes_amb.results.files import read_block, write_result
 
 FORMAT = "bayes-amb-diagnosis-records/1"
 FILE = "records.json"
@@ -97,8 +97,6 @@ class RecordsDiagnosis(Block):
     def load(cls, out_dir: str | Path) -> Self:
         """records.json and every record_<i>/ diagnosis of a folder."""
         d = Path(out_dir)
-        data = read_result(d / FILE)
-        require_format(d / FILE, data, FORMAT)
-        out = cls.from_dict(data, str(d / FILE))
+        out = read_block(cls, d / FILE, FORMAT)
         return replace(out, diagnoses=[Diagnosis.load(d / f"record_{i}")
                                        for i in range(1, len(out.recordings) + 1)])

@@ -18,7 +18,7 @@ from typing import TYPE_CHECKING, Any, Self
 
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.results.blocks import Block, block, omitted, runtime
-from bayes_amb.results.files import read_result, read_rows, require_format, write_result
+from bayes_amb.results.files import read_block, read_rows, write_result
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -106,9 +106,12 @@ class Study(Block):
         import dataclasses
 
         d = Path(out_dir)
-        data = read_result(d / FILE)
-        require_format(d / FILE, data, FORMAT)
-        if isinstance(data.get("conclusions"), str):      # a single conclusion, older files
-            data["conclusions"] = [data["conclusions"]]
-        out = cls.from_dict(data, str(d / FILE))
+        out = read_block(cls, d / FILE, FORMAT)
         return dataclasses.replace(out, rows=read_rows(d / "results.jsonl"))
+
+    @staticmethod
+    def upgrade(data: dict[str, Any]) -> dict[str, Any]:
+        """An older study.json's single conclusion (a string) as a list of one."""
+        if isinstance(data.get("conclusions"), str):
+            data["conclusions"] = [data["conclusions"]]
+        return data
