@@ -136,15 +136,23 @@ def _coherence(R: NDArray, X: NDArray, bands: list[NDArray]) -> tuple[NDArray, N
     """Multiple coherence and F-test p-value of R (nf, 4) on X (nf, m) per band, channel;
     R may carry a leading batch dimension (nd, nf, 4), then so do the results. The
     regression residual is R minus its projection on the band's orthonormal basis of X
-    (QR, shared by the batch)."""
-    m = X.shape[1]
+    (shared by the batch).
+
+    The basis spans only the directions X has: an excitation channel that is zero (one
+    channel excited) adds no regressor. A QR of X with zero columns still returns m
+    orthonormal columns, arbitrary directions of the band (unit bins, in practice), and a
+    residual whose noise peaks in the band (a mode of the noise response) then looked
+    "coherent with the excitation": 31 of 50 effect-free one-channel foreign records were
+    called unexplained that way (the F-test's degrees of freedom counted the dead columns
+    as well)."""
     R3 = R[None] if R.ndim == 2 else R
     coh = np.zeros((R3.shape[0], len(bands), R3.shape[2]))
     p = np.ones_like(coh)
     for b, idx in enumerate(bands):
-        if idx.size <= m + 1:
+        Q = excitation_basis(X[idx])
+        m = Q.shape[1]
+        if m == 0 or idx.size <= m + 1:
             continue
-        Q, _ = np.linalg.qr(X[idx])
         Rb = R3[:, idx]
         ss1 = np.sum(np.abs(Rb - Q @ (np.conj(Q.T) @ Rb)) ** 2, axis=1)
         ss0 = np.sum(np.abs(Rb) ** 2, axis=1)
@@ -152,6 +160,15 @@ def _coherence(R: NDArray, X: NDArray, bands: list[NDArray]) -> tuple[NDArray, N
         F = ((ss0 - ss1) / m) / np.maximum(ss1 / (idx.size - m), 1e-300)
         p[:, b] = stats.f.sf(F, 2 * m, 2 * (idx.size - m))
     return (coh[0], p[0]) if R.ndim == 2 else (coh, p)
+
+
+def excitation_basis(Xb: NDArray, rtol: float = 1e-9) -> NDArray:
+    """Orthonormal basis (nk, r) of the columns of Xb (nk, m): r its numerical rank, the
+    singular values above rtol times the largest (zero columns add none)."""
+    U, s, _ = np.linalg.svd(Xb, full_matrices=False)
+    if s.size == 0 or s[0] == 0.0:
+        return U[:, :0]
+    return U[:, :int(np.sum(s > rtol * s[0]))]
 
 
 def noise_cholesky(like: RobustWhittle, log10_sigma: NDArray) -> NDArray:
