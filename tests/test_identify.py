@@ -39,7 +39,7 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.pid import design_decentralised_pid
 from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.identify import IdentifyOptions, identify
-from bayes_amb.inference.priors import PriorSet
+from bayes_amb.inference.priors import PriorSet, parse_prior
 from bayes_amb.io.recording import load_recording, load_truth, save_recording
 from bayes_amb.results import Identification
 from bayes_amb.rig import load_rig
@@ -369,4 +369,22 @@ def test_map_does_not_run_into_a_prior_corner():
         sd = res.parameters[name].sd
         assert abs(res.map[name] - ref.x[j]) < 0.05 * sd, name
     assert abs(res.map["c_By"]) < 0.8 - 3 * res.parameters["c_By"].sd
+    assert res.converged
+
+
+def test_map_on_a_prior_bound_reports_the_prior_not_nan(rig, observer_1ms):
+    """The record says k_By = 0.5, the prior stops at 0.2: the MAP sits on the bound, a
+    Hessian stencil leaves the prior and the full Laplace approximation cannot be formed.
+    MAP-only identify then gives the others their Laplace intervals (over the dimensions not
+    on a bound), k_By its prior's, and says why; no interval is NaN and none is a bare MAP."""
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.5, "c_By": 0.1}, duration=0.5)
+    res = identify(rec, "k_By,c_By", priors={"k_By": parse_prior("uniform(-0.8, 0.2)")},
+                   options=IdentifyOptions(map_only=True, adequacy=False))
+    assert res.map["k_By"] == pytest.approx(0.2, abs=1e-6)
+    k, c = res.parameters["k_By"], res.parameters["c_By"]
+    assert k.sd == pytest.approx(1.0 / math.sqrt(12), rel=0.02)       # the prior's
+    assert k.hdi90 == pytest.approx([-0.75, 0.15], abs=0.01)
+    assert math.isfinite(c.sd) and 0 < c.sd < 0.2
+    assert res.identifiability["at_prior_bound"] == ["k_By"]
+    assert res.identifiability["notes"][0].startswith("k_By is not identified")
     assert res.converged

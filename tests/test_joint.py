@@ -85,3 +85,18 @@ def test_records_that_disagree_get_the_random_effects_interval_and_a_line(record
     assert s["parameters"]["k_By"]["sd"] == pytest.approx(fixed["random_effects_sd"])
     assert s["parameters"]["k_By"]["sd"] > 5 * max(
         agree["parameters"]["k_By"]["sd"], min(fixed["record_sds"]))
+
+
+def test_a_joint_map_on_a_prior_bound_gets_the_prior_not_zero_width(records):
+    """The records say k_By = 0.2, the prior stops at 0.1: the joint MAP sits on the bound,
+    where the joint Hessian holds it. Its interval is the prior's (as identify reports a
+    record's), not the zero width of a held parameter; c_By keeps its Laplace interval."""
+    from bayes_amb.inference.priors import parse_prior
+
+    s = identify_joint(records, "k_By,c_By", priors={"k_By": parse_prior("uniform(-0.8, 0.1)")},
+                       options=OPT).to_dict()
+    k, c = s["parameters"]["k_By"], s["parameters"]["c_By"]
+    assert s["map"]["k_By"] == pytest.approx(0.1, abs=1e-6)
+    assert k["sd"] == pytest.approx(0.9 / np.sqrt(12), rel=0.02)
+    assert k["hdi90"] == pytest.approx([-0.755, 0.055], abs=0.01)
+    assert 0 < c["sd"] < 0.2

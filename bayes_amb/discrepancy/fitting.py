@@ -25,6 +25,7 @@ from bayes_amb.inference.estimate import (
     LogPosterior,
     _initial_point,
     _theta_start,
+    at_prior_bound,
     hessian_covariance,
 )
 from bayes_amb.inference.priors import Prior
@@ -165,11 +166,6 @@ def _embed(parent: FittedModel, fwd: ExtendedForwardModel, phi: dict[str, float]
     return x
 
 
-def _bounds(post: LogPosterior) -> list[tuple[float, float]]:
-    return [(-np.inf if lo is None else lo, np.inf if hi is None else hi)
-            for lo, hi in post.bounds()]
-
-
 def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | None:
     """Laplace covariance over the dimensions not on a prior bound (zeros elsewhere).
 
@@ -178,11 +174,7 @@ def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | 
     definite, all free dimensions are tried, then only the last ``last`` parameters (a
     candidate's own).
     """
-    bnds = _bounds(post)
-    span = np.array([hi - lo if np.isfinite(hi - lo) else 1.0 for lo, hi in bnds])
-    at_bound = np.array([min(abs(v - lo), abs(hi - v)) < 1e-6 * s
-                         for v, (lo, hi), s in zip(x, bnds, span, strict=True)])
-    free = np.flatnonzero(~at_bound)
+    free = np.flatnonzero(~at_prior_bound(post, x))
     tries = [free[free < post.p], free]
     if last:
         tries.append(free[(free >= post.p - last) & (free < post.p)])

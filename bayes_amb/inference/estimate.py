@@ -115,6 +115,35 @@ def laplace_covariance(post: LogPosterior, x: NDArray) -> NDArray | None:
     return full
 
 
+def at_prior_bound(post: LogPosterior, x: NDArray) -> NDArray:
+    """Which coordinates of x (parameters, then log10 sigma) sit on a bound of their prior
+    (within 1e-6 of its span)."""
+    out = np.zeros(x.size, dtype=bool)
+    for j, (lo, hi) in enumerate(post.bounds()):
+        lo_f = -np.inf if lo is None else lo
+        hi_f = np.inf if hi is None else hi
+        span = hi_f - lo_f if np.isfinite(hi_f - lo_f) else 1.0
+        out[j] = min(abs(x[j] - lo_f), abs(hi_f - x[j])) < 1e-6 * span
+    return out
+
+
+def free_theta_covariance(post: LogPosterior, x: NDArray) -> tuple[NDArray | None, NDArray]:
+    """The Laplace covariance of the parameters not on a prior bound, the noise intensities
+    held at x: (p, p), zero in the rows and columns of those on a bound, or None where it is
+    not negative definite either; and the mask of the parameters on a bound. What identify
+    reports when the full Hessian cannot be formed because a parameter the record does not
+    inform ran to its bound (a stencil point then leaves the prior)."""
+    bound = at_prior_bound(post, x)[:post.p]
+    free = np.flatnonzero(~bound)
+    cov = np.zeros((post.p, post.p))
+    if free.size:
+        sub = hessian_covariance(post, x, free)
+        if sub is None:
+            return None, bound
+        cov[np.ix_(free, free)] = sub
+    return cov, bound
+
+
 def hessian_covariance(post: LogPosterior, x: NDArray, idx: NDArray) -> NDArray | None:
     """Inverse of the negative Hessian of the log posterior at x over the coordinates idx
     (four-point central differences, steps 10x those of the gradient), or None where it is

@@ -134,7 +134,7 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         "priors": prior_set.to_dict(),
         "map": {n: float(v) for n, v in zip(joint_names, z, strict=True)},
         "inference": "joint MAP with Laplace approximation (each record's noise at its MAP)",
-        "parameters": _summary(joint_names, m, cov, rig),
+        "parameters": _summary(joint_names, m, cov, rig, prior_set, bounds),
         "records": [_record_block(rec, res) for rec, res in zip(recordings, own, strict=True)],
         "converged": bool(res.success and cov is not None),
         "seed": opt.seed,
@@ -175,11 +175,10 @@ def _combined_start(own: list[Identification], names: tuple[str, ...],
 
 def _hessian_covariance(neg: Any, z: NDArray, bounds: list) -> NDArray | None:
     """Inverse of the central-difference Hessian of neg at z (None if not positive
-    definite); a parameter on a prior bound is held (zero variance)."""
+    definite); a parameter on a prior bound is held (zero variance here; _summary gives it
+    its prior's interval)."""
     p = z.size
-    free = [j for j, (lo, hi) in enumerate(bounds)
-            if not ((lo is not None and z[j] - lo < 2 * STEP)
-                    or (hi is not None and hi - z[j] < 2 * STEP))]
+    free = [j for j, b in enumerate(bounds) if not _on_bound(z[j], b)]
     H = np.zeros((p, p))
     f0 = neg(z)
     for a in free:
@@ -202,16 +201,30 @@ def _hessian_covariance(neg: Any, z: NDArray, bounds: list) -> NDArray | None:
     return cov
 
 
-def _summary(joint_names: list[str], m: Any, cov: NDArray | None, rig: Any
+def _summary(joint_names: list[str], m: Any, cov: NDArray | None, rig: Any,
+             prior_set: PriorSet | None = None, bounds: list | None = None
              ) -> dict[str, dict[str, Any]]:
     """identify's Laplace summary per joint parameter (a per-record copy 'c_Ax@2' in the
-    units of c_Ax)."""
+    units of c_Ax); one held on its prior bound (_hessian_covariance) gets its prior's
+    interval, as in identify, never the zero width of a held parameter."""
     out = {}
     for j, n in enumerate(joint_names):
         one = replace(m, theta=np.array([m.theta[j]]))
         c = None if cov is None else np.array([[cov[j, j]]])
-        out[n] = _laplace_summary((n.split("@")[0],), one, c, rig)[n.split("@")[0]]
+        base = n.split("@")[0]
+        if prior_set is None or bounds is None:
+            out[n] = _laplace_summary((base,), one, c, rig)[base]
+            continue
+        held = np.array([_on_bound(m.theta[j], bounds[j])])
+        out[n] = _laplace_summary((base,), one, c, rig,
+                                  PriorSet((base,), (prior_set.priors[j],)), held)[base]
     return out
+
+
+def _on_bound(v: float, bound: tuple[float | None, float | None]) -> bool:
+    """Within two Hessian steps of a prior bound (_hessian_covariance holds it there)."""
+    lo, hi = bound
+    return bool((lo is not None and v - lo < 2 * STEP) or (hi is not None and hi - v < 2 * STEP))
 
 
 def _record_block(rec: Recording, res: Identification) -> RecordFit:
