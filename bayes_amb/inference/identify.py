@@ -165,11 +165,15 @@ def _bound_notes(names: tuple[str, ...], bound: np.ndarray) -> dict[str, Any]:
     """The identifiability block of a MAP whose Laplace approximation leaves out the
     parameters on a prior bound."""
     at = [n for n, b in zip(names, bound, strict=True) if b]
+    one = len(at) == 1
     return {"identifiable": False, "at_prior_bound": at,
-            "notes": [f"{n} is not identified by these data: its MAP sits on its prior "
-                      "bound (the record does not inform it, or pushes it past the prior), "
-                      "so its interval is the prior's. Excite the channels it acts on, or "
-                      "leave it out of --params (held at its nominal value)." for n in at]}
+            "notes": [f"{', '.join(at)} {'is' if one else 'are'} not identified by these "
+                      f"data: {'its MAP sits' if one else 'their MAPs sit'} on the prior's "
+                      "bound (the record does not inform "
+                      f"{'it' if one else 'them'}, or pushes past the prior), so "
+                      f"{'its interval is' if one else 'their intervals are'} the prior's. "
+                      "Excite the channels they act on, or leave them out of --params "
+                      "(held at the nominal value)."]}
 
 
 @limited_threads
