@@ -25,9 +25,10 @@ from bayes_amb.planning import Design, Noise, plan
 from bayes_amb.planning.plan import BEARING_COEFFICIENTS, noise_from
 
 
-def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False) -> dict:
+def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False,
+          identify_dir: str = "identify") -> dict:
     rows = []
-    for ident in sorted((run / "identify").glob("*.json")):
+    for ident in sorted((run / identify_dir).glob("*.json")):
         name = ident.stem
         if name.rsplit("_", 1)[0] not in kinds:
             continue
@@ -48,19 +49,36 @@ def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False
         par = s.get("parameters_model_only", s["parameters"])
         if any(par[k]["sd"] is None for k in BEARING_COEFFICIENTS):
             continue                        # identify's Laplace failed on this record
+        bound = set((s.get("identifiability") or {}).get("at_prior_bound", []))
         rows.append({"name": name, **{k: {
+            "informed": p.parameters[k]["informed"], "at_prior_bound": k in bound,
             "predicted_sd": p.sd(k), "reported_sd": par[k]["sd"],
             "predicted_spread": p.parameters[k]["sd_of_estimates"],
-            "z": (par[k]["mean"] - truth[k]) / p.parameters[k]["sd_of_estimates"]}
+            "z": (par[k]["mean"] - truth[k]) / p.parameters[k]["sd_of_estimates"],
+            "z_sd": (par[k]["mean"] - truth[k]) / p.sd(k)}
             for k in BEARING_COEFFICIENTS}})
     out = {"n": len(rows), "rows": rows, "parameters": {}}
     for k in BEARING_COEFFICIENTS:
-        ratio = np.array([r[k]["reported_sd"] / r[k]["predicted_sd"] for r in rows])
-        z = np.array([r[k]["z"] for r in rows])
-        spread = np.array([r[k]["predicted_spread"] / r[k]["predicted_sd"] for r in rows])
-        out["parameters"][k] = {"median_ratio": float(np.median(ratio)),
+        # the plan's first-order prediction is for what it calls informed; a record whose
+        # identify put such a coefficient on its prior bound counts against it
+        use = [r for r in rows if r[k]["informed"]]
+        if len(use) < 2:
+            out["parameters"][k] = {"informed_records": len(use)}
+            continue
+        ratio = np.array([r[k]["reported_sd"] / r[k]["predicted_sd"] for r in use])
+        z = np.array([r[k]["z"] for r in use])
+        z_sd = np.array([r[k]["z_sd"] for r in use])
+        spread = np.array([r[k]["predicted_spread"] / r[k]["predicted_sd"] for r in use])
+        out["parameters"][k] = {"informed_records": len(use),
+                                "at_bound_though_informed": sum(r[k]["at_prior_bound"]
+                                                                for r in use),
+                                "uninformed_at_bound": sum(r[k]["at_prior_bound"]
+                                                           for r in rows
+                                                           if not r[k]["informed"]),
+                                "median_ratio": float(np.median(ratio)),
                                 "ratio_range": [float(ratio.min()), float(ratio.max())],
                                 "sd_of_z": float(np.std(z, ddof=1)),
+                                "sd_of_z_sd": float(np.std(z_sd, ddof=1)),
                                 "median_spread_over_sd": float(np.median(spread))}
     return out
 
@@ -73,12 +91,24 @@ def main() -> None:
                     help="plan with the fitted white intensities alone (no measured colour)")
     ap.add_argument("--at-map", action="store_true",
                     help="plan at identify's MAP on the record (default: at the nominal)")
+    ap.add_argument("--identify-dir", default="identify",
+                    help="the folder of RUN holding identify's summaries")
+    ap.add_argument("--json", type=Path, help="also write the rows and figures here")
     a = ap.parse_args()
-    r = check(a.run, a.kinds.split(","), a.white, a.at_map)
+    r = check(a.run, a.kinds.split(","), a.white, a.at_map, a.identify_dir)
+    if a.json:
+        a.json.write_text(json.dumps(r, indent=1))
     print(f"{r['n']} records")
     for k, v in r["parameters"].items():
-        print(f"{k}: reported / predicted sd median {v['median_ratio']:.2f} "
+        if "median_ratio" not in v:
+            print(f"{k}: informed in {v['informed_records']} records")
+            continue
+        print(f"{k}: informed in {v['informed_records']} records ("
+              f"{v['at_bound_though_informed']} of them at a prior bound in identify; "
+              f"uninformed and at a bound {v['uninformed_at_bound']}); "
+              f"reported / predicted sd median {v['median_ratio']:.2f} "
               f"(range {v['ratio_range'][0]:.2f}-{v['ratio_range'][1]:.2f}), sd of "
+              f"(estimate - truth) / predicted sd {v['sd_of_z_sd']:.2f}, sd of "
               f"(estimate - truth) / predicted spread {v['sd_of_z']:.2f} (predicted spread "
               f"/ predicted sd, median {v['median_spread_over_sd']:.2f})")
 

@@ -5,9 +5,9 @@ The files in this folder were written by main before the typed results (issue 31
 (commit c936d8d), with the tests' thread settings; ``tests/test_golden.py`` re-runs the
 cases and compares, so the move to
 typed result objects is shown to change no number. Regenerate only for a change meant to
-alter results, and say so in the commit:
+alter results, and say so in the commit (name cases to write only theirs):
 
-    PYTHONPATH=. .venv/bin/python -m tests.golden.cases
+    PYTHONPATH=. .venv/bin/python -m tests.golden.cases [actuator_gain_00 ...]
 """
 
 from __future__ import annotations
@@ -108,7 +108,8 @@ def differences(a: Any, b: Any, where: str = "", rtol: float = 1e-4, atol: float
     return [] if a == b else [f"{where}: {a!r} != {b!r}"]
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
+    """Write every golden file, or only those of the cases named (e.g. actuator_gain_00)."""
     import tempfile
 
     from bayes_amb.threads import configure_process
@@ -117,12 +118,21 @@ def main() -> int:
 
     with tempfile.TemporaryDirectory() as tmp:
         work = Path(tmp)
+        only = set(sys.argv[1:] if argv is None else argv)
+
+        def wanted(kind: str, index: int) -> bool:
+            return not only or f"{kind}_{index:02d}" in only
+
         for kind, index in DIAGNOSED:
+            if not wanted(kind, index):
+                continue
             out = diagnosis_json(work, kind, index)
             golden_path(kind, index, "diagnosis").write_bytes(
                 gzip.compress(json.dumps(out, indent=1).encode(), mtime=0))
             sys.stderr.write(f"{kind}_{index:02d}: {out['verdict']}\n")
         for kind, index, sampled in IDENTIFIED:
+            if not wanted(kind, index):
+                continue
             out = summary_json(work, kind, index, sampled)
             golden_path(kind, index, "summary").write_bytes(
                 gzip.compress(json.dumps(out, indent=1).encode(), mtime=0))
