@@ -7,9 +7,13 @@ port, on the channels it excites, its length), and its noise as `--noise-from` t
 (planning.noise_from: the white intensities identify fits on it and the colour of its
 residual; --white: the intensities alone, as before the colour). The predicted posterior
 sd is compared with the sd identify reported on that record, and the estimates' errors
-(truth read only here) with the predicted spread of the estimates.
+(truth read only here) with the predicted sd and the predicted spread of the estimates,
+per coefficient over the records where the plan calls it informed (the first-order
+prediction is claimed nowhere else; how many of the others identify put on a prior bound
+is counted).
 
-    PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force
+    PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force \
+        [--at-map] [--white] [--identify-dir identify] [--json OUT.json]
 """
 
 from __future__ import annotations
