@@ -206,12 +206,13 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
     bound = None
-    if cov is None and opt.map_only:
+    if cov is None and opt.map_only and at_prior_bound(post, x_map)[:post.p].any():
         # a parameter the record does not inform ran to its prior bound: the Laplace
-        # approximation of the others, that one at its prior (_laplace_summary)
-        theta_cov, on_bound = free_theta_covariance(post, x_map)
-        if theta_cov is not None and on_bound.any():
-            cov, bound = theta_cov, on_bound
+        # approximation of the others, that one at its prior (_laplace_summary). With
+        # none on a bound the theta Hessian is the one laplace_covariance already tried.
+        cov, bound = free_theta_covariance(post, x_map)
+        if cov is None:
+            bound = None
     summary: dict[str, Any] = {
         "format": "bayes-amb-summary/1",
         "package_version": __version__,
