@@ -108,15 +108,20 @@ def format_joint(s: Identification) -> str:
     wall = f", {s.wall_s:.1f} s" if s.wall_s is not None else ""
     lines = [f"Joint identification of {len(s.recordings or [])} recordings ({s.inference}, "
              f"{'converged' if s.converged else 'NOT converged'}{wall})",
-             f"{'param':<9} {'mean':>9} {'sd':>9} {'90% HDI':>21} {'physical mean':>16}"]
+             f"{'param':<9} {'mean':>9} {'sd':>9} {'90% HDI':>21} {'physical mean':>16}"
+             + (f" {'R-hat':>6} {'ESS':>6}" if s.sampler is not None else "")]
     for n, v in s.parameters.items():
         lo, hi = v.hdi90
+        mix = (f" {v.r_hat:>6.3f} {v.ess_bulk:>6.0f}"
+               if s.sampler is not None and v.r_hat is not None else "")
         lines.append(f"{n:<9} {v.mean:>9.4f} {v.sd:>9.3g} [{lo:>8.4f}, {hi:>8.4f}] "
-                     f"{v.physical_mean:>11.4g} {v.unit}")
+                     f"{v.physical_mean:>11.4g} {v.unit:<5}{mix}")
     for i, r in enumerate(s.records or [], 1):
         noise = ", ".join(f"{k} {v.value:.3g} {v.unit}" for k, v in r.noise.items())
         lines.append(f"record {i}: {r.recording}, {r.speed_rpm:g} rpm, dt {r.dt:g} s; "
-                     f"noise {noise}")
+                     f"noise (MAP) {noise}")
+    for note in (s.identifiability or {}).get("notes", []):
+        lines.append(f"warning: {note}")
     if s.agreement is not None and not s.agreement.disagree:
         lines.append(f"agreement: {s.agreement.line}")
     if s.adequacy is not None:
@@ -130,11 +135,18 @@ def _run_joint(args: argparse.Namespace, priors) -> int:
     for rec in recs:
         check_rig_option(args, rec)
     per = tuple(n.strip() for n in args.per_record.split(",") if n.strip())
-    result = identify_joint(recs, args.params, priors, IdentifyOptions(
-        map_only=True, map_method=args.map_method, seed=args.seed), per_record=per)
+    update, bar = _progress_bar(not (args.no_progress or args.json or args.map_only))
+    try:
+        result = identify_joint(recs, args.params, priors, IdentifyOptions(
+            walkers=args.walkers, steps=args.steps, map_only=args.map_only,
+            map_method=args.map_method, seed=args.seed, progress=update), per_record=per)
+    finally:
+        if bar is not None:
+            bar.close()
     result.save(args.out)
     emit(to_jsonable(result.to_dict()), format_joint(result)
-         + f"\nwrote {args.out}/summary.json", args.json)
+         + f"\nwrote {args.out}/summary.json"
+         + ("" if args.map_only else f" and {args.out}/posterior.nc"), args.json)
     return 0
 
 

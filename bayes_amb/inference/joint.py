@@ -44,9 +44,10 @@ from bayes_amb.inference.identify import (
     _laplace_summary,
     identify,
 )
+from bayes_amb.inference.joint_sampling import JointLogPosterior, sample_joint, sampled_summary
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.io.recording import Recording
-from bayes_amb.results.identification import FILE, Identification, RecordFit
+from bayes_amb.results.identification import FILE, Identification, NoisePosterior, RecordFit
 from bayes_amb.uncertainty import parse_param_list
 
 STEP = 1e-4
@@ -139,18 +140,38 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         "converged": bool(res.success and cov is not None),
         "seed": opt.seed,
     }
+    more: dict[str, Any] = {}
+    if not opt.map_only:
+        more = _sample(summary, likes, idx, prior_set, z, cov, sigmas, opt, recordings)
     inadequate = [i for i, o in enumerate(own) if o.adequacy is not None
                   and not o.adequacy.adequate]
     summary["adequacy"] = _joint_adequacy(own, inadequate)
     if inadequate:
         _product_of_reported(summary, own, names, joint_names, idx, prior_set, rig)
     _check_agreement(summary, own, [n for n in names if n not in per], rig)
-    if not opt.map_only:
-        summary["inference_note"] = ("the joint posterior is the Laplace approximation; "
-                                     "emcee is run per record (identify REC.csv)")
     summary["wall_s"] = time.perf_counter() - t0
     return replace(Identification.from_dict(summary, FILE), names=tuple(joint_names),
-                   map_result=m)
+                   map_result=m, **more)
+
+
+def _sample(summary: dict[str, Any], likes: list, idx: list[NDArray], prior_set: PriorSet,
+            z: NDArray, cov: NDArray | None, sigmas: list[NDArray], opt: IdentifyOptions,
+            recordings: list[Recording]) -> dict[str, Any]:
+    """emcee on the joint posterior (joint_sampling.py): its summary entries replace the
+    Laplace ones; returns the draws for the result."""
+    post = JointLogPosterior(likes, idx, prior_set)
+    run, n_walkers, used = sample_joint(post, z, cov, sigmas, opt.walkers, opt.steps,
+                                        opt.max_steps, opt.seed, opt.progress)
+    attrs = {"package_version": __version__, "recordings": ", ".join(
+        str(r.source) for r in recordings), "n_steps": run.n_steps, "burn": run.burn,
+        "thin": run.thin, "seed": opt.seed, "inference": "joint emcee ensemble"}
+    found, noise, dt = sampled_summary(summary["parameters_estimated"], run, n_walkers, used,
+                                       post, recordings[0].rig, attrs)
+    summary.update(found)
+    summary["records"] = [replace(block, noise_posterior={k: NoisePosterior(**v)
+                                                          for k, v in rows.items()})
+                          for block, rows in zip(summary["records"], noise, strict=True)]
+    return {"posterior": dt, "samples": run.samples}
 
 
 _NOISE_MID = np.array([-7.0, -7.0, -3.0])

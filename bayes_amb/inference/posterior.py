@@ -72,7 +72,7 @@ def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,
     out: dict[str, dict[str, Any]] = {}
     for j, n in enumerate(names):
         row = s.loc[n]
-        spec = get_spec(n)
+        spec = get_spec(n.split("@")[0])          # a per-record copy 'c_Ax@2'
         scale = spec.physical_scale(rig)
         lo, hi = float(row["hdi90_lb"]), float(row["hdi90_ub"])
         phys = sorted([lo * scale, hi * scale])

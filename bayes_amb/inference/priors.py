@@ -210,6 +210,16 @@ def _log_prior(theta, ls, kind, a, b, lo, hi, trunc, const, log_mass, nlo, nhi, 
         out[r] = lp
 
 
+def noise_log_prior(log10_sigma: NDArray) -> NDArray:
+    """Log prior of a batch of log10 noise intensities (nb, 3): uniform on
+    NOISE_LOG10_BOUNDS, -inf outside."""
+    lp = np.zeros(log10_sigma.shape[0])
+    for j, (lo, hi) in enumerate(NOISE_LOG10_BOUNDS.values()):
+        inside = (log10_sigma[:, j] >= lo) & (log10_sigma[:, j] <= hi)
+        lp = np.where(inside, lp - np.log(hi - lo), -np.inf)
+    return lp
+
+
 @dataclass(frozen=True)
 class PriorSet:
     """Priors of theta (in parameter order) and the log-uniform noise intensities."""
@@ -238,10 +248,7 @@ class PriorSet:
         lp = np.zeros(theta.shape[0])
         for j, pr in enumerate(self.priors):
             lp = lp + pr.logpdf(theta[:, j])
-        for j, (lo, hi) in enumerate(NOISE_LOG10_BOUNDS.values()):
-            inside = (log10_sigma[:, j] >= lo) & (log10_sigma[:, j] <= hi)
-            lp = np.where(inside, lp - np.log(hi - lo), -np.inf)
-        return lp
+        return lp + noise_log_prior(log10_sigma)
 
     @cached_property
     def _table(self) -> tuple[NDArray, ...] | None:

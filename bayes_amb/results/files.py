@@ -39,15 +39,20 @@ def read_block(cls: Any, path: Path, expected: str) -> Any:
     return cls.from_dict(getattr(cls, "upgrade", lambda d: d)(data), str(path))
 
 
-def read_posterior(path: Path) -> Any:
-    """An ArviZ NetCDF posterior (posterior.nc) with the groups identify writes, loaded."""
+POSTERIOR_GROUPS = ("posterior", "observed_data", "constant_data")
+"""The groups of one record's posterior.nc (identify); a joint one (several recordings)
+has posterior and sample_stats."""
+
+
+def read_posterior(path: Path, groups: tuple[str, ...] = POSTERIOR_GROUPS) -> Any:
+    """An ArviZ NetCDF posterior (posterior.nc) with ``groups``, loaded."""
     import arviz as az
 
     try:
         dt = az.from_netcdf(path)
     except (OSError, ValueError) as exc:
         raise ResultError(f"{path}: cannot be read as ArviZ NetCDF ({exc})") from None
-    for group in ("posterior", "observed_data", "constant_data"):
+    for group in groups:
         if group not in dt.children:
             raise ResultError(f"{path}: group {group}: missing")
     return dt.load()

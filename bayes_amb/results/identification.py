@@ -23,7 +23,12 @@ import numpy as np
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.results.blocks import Block, block, omitted, runtime
 from bayes_amb.results.diagnosis import Adequacy, Agreement
-from bayes_amb.results.files import read_block, read_posterior, write_result
+from bayes_amb.results.files import (
+    POSTERIOR_GROUPS,
+    read_block,
+    read_posterior,
+    write_result,
+)
 
 if TYPE_CHECKING:
     import xarray as xr
@@ -120,6 +125,7 @@ class RecordFit(Block):
     noise: dict[str, NoiseValue]
     adequacy: Adequacy | None = None
     parameters: dict[str, Posterior]
+    noise_posterior: dict[str, NoisePosterior] | None = omitted()
 
 
 @block
@@ -216,6 +222,8 @@ class Identification(Block):
 
         d = Path(run_dir)
         out = read_block(cls, d / FILE, FORMAT)
-        post = read_posterior(d / "posterior.nc") if (d / "posterior.nc").is_file() else None
+        groups = ("posterior", "sample_stats") if out.recordings else POSTERIOR_GROUPS
+        post = (read_posterior(d / "posterior.nc", groups) if (d / "posterior.nc").is_file()
+                else None)
         return dataclasses.replace(out, posterior=post,
                                    names=tuple(out.parameters_estimated))
