@@ -18,12 +18,14 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from bayes_amb import __version__
 from bayes_amb.discrepancy.adequacy import assess_fit
 from bayes_amb.discrepancy.fitstats import draws, theta_summary
 from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.bounded import bounded_laplace, bounded_notes, bounded_summary
 from bayes_amb.inference.estimate import (
     LogPosterior,
     MapResult,
@@ -136,13 +138,37 @@ def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | Non
                       "physical_hdi90": sorted([lo * scale, hi * scale])}
             continue
         sd = float(math.sqrt(cov[j, j])) if cov is not None else float("nan")
-        lo, hi = m.theta[j] - 1.6449 * sd, m.theta[j] + 1.6449 * sd
-        out[n] = {"mean": float(m.theta[j]), "sd": sd, "hdi90": [lo, hi], "ess_bulk": None,
+        mean, lo, hi = float(m.theta[j]), m.theta[j] - 1.6449 * sd, m.theta[j] + 1.6449 * sd
+        if prior_set is not None:
+            mean, sd, lo, hi = within_support(mean, sd, prior_set.priors[j].support)
+        out[n] = {"mean": mean, "sd": sd, "hdi90": [lo, hi], "ess_bulk": None,
                   "ess_tail": None, "r_hat": None, "tau": None, "unit": spec.unit,
                   "physical": spec.physical_label,
-                  "physical_mean": float(m.theta[j]) * scale, "physical_sd": sd * abs(scale),
+                  "physical_mean": mean * scale, "physical_sd": sd * abs(scale),
                   "physical_hdi90": sorted([lo * scale, hi * scale])}
     return out
+
+
+OUTSIDE_SUPPORT = 1e-3
+"""Mass of the Laplace normal outside the prior's support above which it is truncated."""
+
+
+def within_support(mu: float, sd: float, support: tuple[float, float]
+                   ) -> tuple[float, float, float, float]:
+    """The Laplace normal N(mu, sd^2) truncated to the prior's support: its mean, sd and
+    central 90 % interval. The posterior is zero where the prior is; an untruncated normal
+    of a weakly informed coefficient would give an interval past the prior's bound (c_By
+    [0.10, 1.24] under uniform(-0.8, 0.8) on a one-channel record). Unchanged when less
+    than OUTSIDE_SUPPORT of its mass lies outside."""
+    lo, hi = mu - 1.6449 * sd, mu + 1.6449 * sd
+    if not (np.isfinite(sd) and sd > 0):
+        return mu, sd, lo, hi
+    za, zb = (support[0] - mu) / sd, (support[1] - mu) / sd
+    if stats.norm.cdf(za) + stats.norm.sf(zb) < OUTSIDE_SUPPORT:
+        return mu, sd, lo, hi
+    t = stats.truncnorm(za, zb, loc=mu, scale=sd)
+    q05, q95 = (float(q) for q in t.ppf([0.05, 0.95]))
+    return float(t.mean()), float(t.std()), q05, q95
 
 
 def _from_nominal_too(post: LogPosterior, m: MapResult, method: str) -> MapResult:
@@ -205,14 +231,17 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     m = _from_nominal_too(post, m, opt.map_method)
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
-    bound = None
+    bound = bounded = None
     if cov is None and opt.map_only and at_prior_bound(post, x_map)[:post.p].any():
-        # a parameter the record does not inform ran to its prior bound: the Laplace
-        # approximation of the others, that one at its prior (_laplace_summary). With
-        # none on a bound the theta Hessian is the one laplace_covariance already tried.
-        cov, bound = free_theta_covariance(post, x_map)
-        if cov is None:
-            bound = None
+        # a parameter ran to its prior bound, where the central stencil leaves the prior:
+        # the Laplace approximation truncated to the prior (bounded.py); failing that,
+        # the others' over the free dimensions, that one at its prior (_laplace_summary).
+        # With none on a bound the theta Hessian is the one laplace_covariance tried.
+        bounded = bounded_laplace(post, x_map, opt.seed)
+        if bounded is None:
+            cov, bound = free_theta_covariance(post, x_map)
+            if cov is None:
+                bound = None
     summary: dict[str, Any] = {
         "format": "bayes-amb-summary/1",
         "package_version": __version__,
@@ -235,19 +264,24 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     if opt.adequacy:
         verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
         summary["adequacy"] = verdict.to_dict()
-        if verdict.adequate and not (opt.map_only and cov is None):
+        if verdict.adequate and not (opt.map_only and cov is None
+                                        and bounded is None):
             nominal = None
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"
-        if bound is not None:
-            summary["identifiability"] = _bound_notes(names, bound)
-        summary["parameters"] = _laplace_summary(names, m, cov, recording.rig, prior_set,
-                                                 bound, opt.seed)
+        if bounded is not None:
+            summary["identifiability"] = bounded_notes(names, bounded, prior_set)
+            summary["parameters"] = bounded_summary(names, bounded, recording.rig)
+        else:
+            if bound is not None:
+                summary["identifiability"] = _bound_notes(names, bound)
+            summary["parameters"] = _laplace_summary(names, m, cov, recording.rig,
+                                                     prior_set, bound, opt.seed)
         if cov is not None and bound is None:   # theta block: derived quantities need
             summary["laplace_cov"] = {          # the correlations, not only the sds
                 "names": list(names), "theta": np.asarray(cov)[:len(names),
                                                                :len(names)].tolist()}
-        summary["converged"] = bool(m.success and cov is not None)
+        summary["converged"] = bool(m.success and (cov is not None or bounded is not None))
         _with_model_error(summary, nominal, opt.seed)
         summary["wall_s"] = time.perf_counter() - t0
         return _result(summary, names, m, eps, like)
