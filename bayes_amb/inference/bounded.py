@@ -28,7 +28,6 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from bayes_amb.inference.estimate import (
-    LogPosterior,
     _grad,
     _steps,
     at_prior_bound,
@@ -75,15 +74,16 @@ class BoundedLaplace:
         return self.bound & (below | above)
 
 
-def bounded_laplace(post: LogPosterior, x: NDArray, seed: int = 0) -> BoundedLaplace | None:
+def bounded_laplace(post: Any, x: NDArray, seed: int = 0) -> BoundedLaplace | None:
     """The truncated Laplace approximation at x (theta, then log10 sigma held), or None
-    when the expansion is not negative definite (module docstring)."""
+    when the expansion is not negative definite (module docstring). ``post``: a
+    LogPosterior, or joint_sampling.JointLogPosterior (x then holds each record's noise)."""
     p = post.p
     bound = at_prior_bound(post, x)[:p]
     box = post.bounds()[:p]
     lo = np.array([-np.inf if b[0] is None else b[0] for b in box])
     hi = np.array([np.inf if b[1] is None else b[1] for b in box])
-    h = _steps(post) * 10
+    h = np.concatenate([_steps(post) * 10, np.zeros(x.size - post.p - 3)])
     x_in = np.array(x, dtype=float)
     for j in np.flatnonzero(bound):
         inward = 1.0 if abs(x[j] - lo[j]) < abs(hi[j] - x[j]) else -1.0
@@ -92,7 +92,7 @@ def bounded_laplace(post: LogPosterior, x: NDArray, seed: int = 0) -> BoundedLap
     cov = hessian_covariance(post, x_in, idx)
     if cov is None:
         return None
-    _, g = _grad(post, x_in, _steps(post), idx)
+    _, g = _grad(post, x_in, h / 10, idx)
     center = x_in[:p] + cov @ g
     draws = truncated_normal_draws(center, cov, lo, hi, np.random.default_rng(seed))
     return BoundedLaplace(center=center, cov=cov, lo=lo, hi=hi, bound=bound, draws=draws)
@@ -131,7 +131,7 @@ def bounded_summary(names: tuple[str, ...], bl: BoundedLaplace, rig: Any
     central 90 % interval, normalised and physical."""
     out = {}
     for j, n in enumerate(names):
-        spec = get_spec(n)
+        spec = get_spec(n.split("@")[0])           # a joint per-record copy 'c_Ax@2'
         scale = spec.physical_scale(rig)
         v = bl.draws[:, j]
         mean, sd = float(v.mean()), float(v.std())

@@ -38,6 +38,7 @@ from scipy.optimize import minimize
 
 from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.bounded import bounded_laplace, bounded_notes, bounded_summary
 from bayes_amb.inference.consistency import agreement
 from bayes_amb.inference.identify import (
     IdentifyOptions,
@@ -140,6 +141,9 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         "converged": bool(res.success and cov is not None),
         "seed": opt.seed,
     }
+    if any(_on_bound(v, b) for v, b in zip(z, bounds, strict=True)):
+        _cut_at_bounds(summary, JointLogPosterior(likes, idx, prior_set), z, sigmas,
+                       joint_names, rig, opt.seed)
     more: dict[str, Any] = {}
     if not opt.map_only:
         more = _sample(summary, likes, idx, prior_set, z, cov, sigmas, opt, recordings)
@@ -152,6 +156,19 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
     summary["wall_s"] = time.perf_counter() - t0
     return replace(Identification.from_dict(summary, FILE), names=tuple(joint_names),
                    map_result=m, **more)
+
+
+def _cut_at_bounds(summary: dict[str, Any], post: JointLogPosterior, z: NDArray,
+                   sigmas: list[NDArray], joint_names: list[str], rig: Any, seed: int) -> None:
+    """A joint MAP with a coefficient on a prior bound: the Laplace approximation cut at the
+    prior (bounded.py, as identify reports a record's), when it can be formed there; else
+    the held coefficient keeps its prior's interval (_summary)."""
+    bl = bounded_laplace(post, np.concatenate([z, *sigmas]), seed)
+    if bl is None or not bl.bound.any():
+        return
+    names = tuple(joint_names)
+    summary["parameters"] = bounded_summary(names, bl, rig)
+    summary["identifiability"] = bounded_notes(names, bl, post.priors)
 
 
 def _sample(summary: dict[str, Any], likes: list, idx: list[NDArray], prior_set: PriorSet,

@@ -25,6 +25,7 @@ import xarray as xr
 from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.posterior import identifiability, summarise
 from bayes_amb.inference.priors import PriorSet, noise_log_prior
 from bayes_amb.inference.sampler import SamplerRun, initial_ball, run_emcee
@@ -51,6 +52,11 @@ class JointLogPosterior:
     @property
     def ndim(self) -> int:
         return self.p + 3 * len(self.likes)
+
+    def bounds(self) -> list[tuple[float | None, float | None]]:
+        """Each coordinate's prior bounds (None: unbounded), as LogPosterior.bounds."""
+        one = LogPosterior(self.likes[0], self.priors).bounds()
+        return one[:self.p] + one[self.p:] * len(self.likes)
 
     def noise(self, P: NDArray, r: int) -> NDArray:
         """Record r's log10 noise intensities in the rows of P."""
