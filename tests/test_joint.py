@@ -137,3 +137,20 @@ def test_joint_emcee_samples_the_noise_per_record_and_agrees_with_laplace(record
     with pytest.raises(BayesAmbError, match="--walkers"):
         identify_joint(records, "k_By,c_By",
                        options=IdentifyOptions(adequacy=False, walkers=8))
+
+
+def test_identify_and_diagnose_take_a_list_of_recordings(records, monkeypatch):
+    """identify([rec1, rec2], ...) is the joint posterior; diagnose([rec1, rec2]) hands the
+    list to diagnose_records (stubbed here: the call is what is tested)."""
+    joint = identify_joint(records, "k_By,c_By", options=OPT)
+    listed = identify(records, "k_By,c_By", options=OPT)
+    assert listed.recordings == joint.recordings and listed.map == joint.map
+    with pytest.raises(BayesAmbError, match="per-record"):
+        identify(records[0], "k_By", options=OPT, per_record=("k_By",))
+    import bayes_amb.discrepancy.records as rec_mod
+    from bayes_amb.discrepancy.diagnose import diagnose
+
+    seen = {}
+    monkeypatch.setattr(rec_mod, "diagnose_records",
+                        lambda recs, *a: seen.setdefault("n", len(recs)))
+    assert diagnose(records) == 2 and seen == {"n": 2}
