@@ -62,6 +62,11 @@ def test_joint_cli(records, tmp_path, capsys):
     s = json.loads(out)
     assert len(s["records"]) == 2 and "k_By" in s["parameters"]
     assert json.loads((tmp_path / "run" / "summary.json").read_text())["recordings"] == paths
+    page = (tmp_path / "run" / "joint.html").read_text()
+    assert "The joint posterior" in page and "Each record and the joint posterior" in page
+    (tmp_path / "run" / "joint.html").unlink()
+    code, out, _ = run_cli(["report", str(tmp_path / "run")], capsys)
+    assert code == 0 and "joint.html" in out and (tmp_path / "run" / "joint.html").is_file()
     code, out, _ = run_cli(["identify", *paths, "--params", "k_By", "--steps", "100",
                             "--no-progress", "--out", str(tmp_path / "sampled")], capsys)
     assert code == 0 and "R-hat" in out and "posterior.nc" in out

@@ -144,9 +144,12 @@ def _run_joint(args: argparse.Namespace, priors) -> int:
         if bar is not None:
             bar.close()
     result.save(args.out)
+    from bayes_amb.report.joint import write_joint_report
+    page = write_joint_report(args.out)
     emit(to_jsonable(result.to_dict()), format_joint(result)
          + f"\nwrote {args.out}/summary.json"
-         + ("" if args.map_only else f" and {args.out}/posterior.nc"), args.json)
+         + ("" if args.map_only else f", {args.out}/posterior.nc")
+         + f" and {page}", args.json)
     return 0
 
 

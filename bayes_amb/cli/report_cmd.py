@@ -62,6 +62,13 @@ def run(args: argparse.Namespace) -> int:
         if not quiet:
             sys.stderr.write(f"[{time.perf_counter() - t0:5.1f} s] {msg}\n")
 
+    from bayes_amb.report.joint import is_joint_run, write_joint_report
+    if is_joint_run(args.run_dir):            # identify REC1 REC2 ... --out RUN_DIR
+        path = write_joint_report(args.run_dir, args.out)
+        emit({"html": str(path), "pdf": None}, f"wrote {path} (a joint identification of "
+             "several recordings: one HTML page; report each record's own run for the "
+             "full report)", args.json)
+        return 0
     data = collect_run(args.run_dir, recording=args.recording, studies=args.study)
     check_rig_option(args, data.recording)
     progress(f"read {args.run_dir}")

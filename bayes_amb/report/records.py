@@ -141,32 +141,55 @@ def _shared_table(reports: list[Diagnosis]) -> tuple[Table | None, dict[str, Any
 
 def _forest(reports: list[Diagnosis], speeds: list[float | None]
             ) -> fg.ReportFigure | None:
-    import matplotlib.pyplot as plt
     names, per = _coefficients(reports)
     if not names:
         return None
-    n_rec = len(reports)
-    fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(names) * max(n_rec, 2) / 2 + 1.2))
+    return forest_figure(names, per, record_labels(speeds), None, "records_coefficients",
+                         "Bearing coefficients per record",
+                         "Mean and 90 % HDI of each coefficient in each record's diagnosis "
+                         "(parameters_after). Records that agree overlap; the table above "
+                         "tests it.")
+
+
+def record_labels(speeds: list[float | None]) -> list[str]:
+    """'record 1 (20475 rpm)', ... for the legends."""
+    return [f"record {i}" + ("" if v is None else f" ({v:.0f} rpm)")
+            for i, v in enumerate(speeds, 1)]
+
+
+def forest_figure(names: list[str], per: dict[str, list[Any]], labels: list[str],
+                  joint: dict[str, Any] | None, key: str, title: str, caption: str,
+                  xlabel: str = "theta (fraction of the nominal value)"
+                  ) -> fg.ReportFigure:
+    """Each coefficient's mean and 90 % HDI per record (``per[name]``: Posterior-like
+    objects with mean and hdi90), and the joint one in black below them when given. With
+    ``joint``, every value is shown as (value - joint mean) / joint sd, so that
+    coefficients of very different size and precision share one axis."""
+    import matplotlib.pyplot as plt
+    n_rec = len(labels)
+    rows = n_rec + (joint is not None)
+    fig, ax = plt.subplots(figsize=(7.5, 0.45 * len(names) * max(rows, 2) / 2 + 1.2))
     colours = plt.rcParams["axes.prop_cycle"].by_key()["color"]
     for j, n in enumerate(names):
-        for i, v in enumerate(per[n]):
-            y = j + (i - (n_rec - 1) / 2) * 0.8 / max(n_rec, 2)
-            ax.plot(v.hdi90, [y, y], color=colours[i % len(colours)], lw=2.2,
-                    label=(f"record {i + 1}" + ("" if speeds[i] is None
-                                                 else f" ({speeds[i]:.0f} rpm)"))
-                    if j == 0 else None)
-            ax.plot([v.mean], [y], "o", color=colours[i % len(colours)], ms=4)
+        items = [(v, labels[i], colours[i % len(colours)]) for i, v in enumerate(per[n])]
+        if joint is not None and n in joint:
+            items.append((joint[n], "joint", "black"))
+        c, w = 0.0, 1.0
+        if joint is not None and n in joint and joint[n].sd > 0:
+            c, w = joint[n].mean, joint[n].sd
+        for i, (v, lab, col) in enumerate(items):
+            y = j + (i - (rows - 1) / 2) * 0.8 / max(rows, 2)
+            ax.plot([(h - c) / w for h in v.hdi90], [y, y], color=col, lw=2.2,
+                    label=lab if j == 0 else None)
+            ax.plot([(v.mean - c) / w], [y], "o", color=col, ms=4)
     ax.set_yticks(range(len(names)), names)
     ax.invert_yaxis()
     ax.axvline(0.0, color="0.6", lw=0.8)
-    ax.set_xlabel("theta (fraction of the nominal value)")
+    ax.set_xlabel(xlabel)
     ax.legend(loc="best", fontsize=8)
     ax.grid(axis="x", alpha=0.3)
     fig.tight_layout()
-    out = fg.render_figure(fig, "records_coefficients", "Bearing coefficients per record",
-                           "Mean and 90 % HDI of each coefficient in each record's "
-                           "diagnosis (parameters_after). Records that agree overlap; "
-                           "the table above tests it.")
+    out = fg.render_figure(fig, key, title, caption)
     plt.close(fig)
     return out
 
