@@ -8,14 +8,23 @@ value past what the prior allows (a model that lacks something, or a prior set t
 tight). Reporting the prior's interval is right for the first and wrong for the second:
 there the posterior lies against the bound, and the prior's interval may exclude it.
 
-Both are the same approximation: the log posterior's quadratic expansion, taken where
+One approximation serves both: the log posterior's quadratic expansion, taken where
 its stencil stays inside the prior (the bound coordinates moved inward by 2.5 Hessian
 steps), is the unconstrained normal N(mu, Sigma) with mu = x + Sigma g (one Newton step
 from the MAP, g the gradient there), and the posterior is that normal truncated to the
 prior's box. A flat direction gives a wide normal, so its truncation is close to the
 prior; a strongly informed one gives a narrow normal centred past the bound, so its
-truncation hugs the bound. Its marginals are drawn by Gibbs sampling (each conditional a
-one-dimensional truncated normal), in many short parallel chains.
+truncation hugs the bound. Its marginals are drawn exactly by rejection, or by Gibbs
+sampling (each conditional a one-dimensional truncated normal) in many parallel chains.
+
+Measured on 160 foreign process-force records, the cut normal is right only for a
+coefficient the record informs and puts near the bound. Where the record does not
+inform it (sd before the bound at least half the prior's) the expansion's centre is an
+artefact of a flat, non-quadratic surface: cut normals held the truth in 72 of 107 such
+coefficients (the prior's interval: all). Where the record pushes it far past the bound
+(PAST_BOUND_SD), the model lacks something and the cut normal held it in 2 of 7. Those
+two kinds report their prior's interval (identify, joint: ``to_prior``) with a note that
+says which; only the informed ones near a bound get the cut normal.
 """
 
 from __future__ import annotations
@@ -72,6 +81,18 @@ class BoundedLaplace:
         below = (self.lo - self.center) / sd > PAST_BOUND_SD
         above = (self.center - self.hi) / sd > PAST_BOUND_SD
         return self.bound & (below | above)
+
+    def weak(self, priors: Any) -> NDArray:
+        """The bound coordinates the record does not inform: their unconstrained sd at
+        least WEAK_SHARE of their prior's."""
+        sd = np.sqrt(np.diag(self.cov))
+        prior_sd = np.array([pr.sd for pr in priors.priors])
+        return self.bound & (sd >= WEAK_SHARE * prior_sd)
+
+    def to_prior(self, priors: Any) -> NDArray:
+        """The bound coordinates whose interval is their prior's, not the cut normal's:
+        those not informed, and those pushed past the prior (module docstring)."""
+        return self.weak(priors) | self.past_bound()
 
 
 def bounded_laplace(post: Any, x: NDArray, seed: int = 0) -> BoundedLaplace | None:
@@ -144,37 +165,36 @@ def bounded_summary(names: tuple[str, ...], bl: BoundedLaplace, rig: Any
     return out
 
 
-def bounded_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any
+def bounded_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any, cut: bool
                   ) -> dict[str, Any]:
     """The identifiability block: per coefficient on a bound, whether the record pushes it
-    past the prior (a value the prior excludes), informs it weakly (its sd before the
-    bound at least half the prior's, the search drifted there), or puts it near the bound
-    (its posterior cut there by the prior)."""
+    past the prior (a value the prior excludes), does not inform it (its sd before the
+    bound at least half the prior's: the search drifted there), or puts it near the bound.
+    ``cut``: whether a near one's interval is the cut normal's (else all are the prior's)."""
     sd = np.sqrt(np.diag(bl.cov))
-    past = bl.past_bound()
-    notes, weak = [], []
+    past, weak = bl.past_bound(), bl.weak(priors)
+    notes = []
     for j in np.flatnonzero(bl.bound):
         n = names[j]
         edge = bl.lo[j] if abs(bl.center[j] - bl.lo[j]) < abs(bl.center[j] - bl.hi[j]) \
             else bl.hi[j]
         said = f"{bl.center[j]:.4g} +- {sd[j]:.2g}"
-        share = sd[j] / priors.priors[j].sd
         if past[j]:
             notes.append(f"{n} is pushed past its prior's bound {edge:g}: the record alone "
-                         f"says {said}, which the prior excludes, so its posterior lies "
-                         "against the bound. A model that lacks something (see adequacy) "
-                         "or a prior set too tight; do not read its interval as the "
-                         "coefficient's value.")
-        elif share >= WEAK_SHARE:
-            weak.append(n)
+                         f"says {said}, which the prior excludes. A model that lacks "
+                         "something (see adequacy) or a prior set too tight; its interval "
+                         "is the prior's, not the coefficient's value.")
+        elif weak[j]:
             notes.append(f"{n} is not identified by these data: its MAP sits on the prior's "
-                         f"bound {edge:g}, its sd before the bound {share:.0%} of the "
-                         "prior's; its interval is the Laplace approximation cut at the "
-                         "prior's bounds, close to the prior's. Excite the channels it acts "
-                         "on, or leave it out of --params.")
+                         f"bound {edge:g}, its sd before the bound "
+                         f"{sd[j] / priors.priors[j].sd:.0%} of the prior's, so its "
+                         "interval is the prior's. Excite the channels it acts on, or leave "
+                         "it out of --params (held at the nominal value).")
         else:
             notes.append(f"{n} lies at its prior's bound {edge:g} (the record says {said}): "
-                         "its interval is the Laplace approximation cut at the bound.")
-    return {"identifiable": not (weak or past.any()),
+                         + ("its interval is the Laplace approximation cut at the bound."
+                            if cut else "its interval is the prior's (another coefficient "
+                            "on a bound is not informed)."))
+    return {"identifiable": not (weak.any() or past.any()),
             "at_prior_bound": [names[j] for j in np.flatnonzero(bl.bound)],
             "past_prior_bound": [names[j] for j in np.flatnonzero(past)], "notes": notes}

@@ -240,14 +240,19 @@ def identify(recording: Recording | list[Recording],
     m = _from_nominal_too(post, m, opt.map_method)
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
-    bound = bounded = None
+    bound = bounded = notes = None
     if cov is None and opt.map_only and at_prior_bound(post, x_map)[:post.p].any():
         # a parameter ran to its prior bound, where the central stencil leaves the prior:
-        # the Laplace approximation truncated to the prior (bounded.py); failing that,
-        # the others' over the free dimensions, that one at its prior (_laplace_summary).
-        # With none on a bound the theta Hessian is the one laplace_covariance tried.
+        # the Laplace approximation truncated to the prior (bounded.py) when every bound
+        # one is informed and near it; else the others' over the free dimensions and the
+        # bound ones' priors (_laplace_summary). With none on a bound the theta Hessian
+        # is the one laplace_covariance tried.
         bounded = bounded_laplace(post, x_map, opt.seed)
-        if bounded is None:
+        cut = bounded is not None and not bounded.to_prior(prior_set).any()
+        if bounded is not None:
+            notes = bounded_notes(names, bounded, prior_set, cut)
+        if not cut:
+            bounded = None
             cov, bound = free_theta_covariance(post, x_map)
             if cov is None:
                 bound = None
@@ -278,12 +283,11 @@ def identify(recording: Recording | list[Recording],
             nominal = None
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"
+        if notes is not None or bound is not None:
+            summary["identifiability"] = notes or _bound_notes(names, bound)
         if bounded is not None:
-            summary["identifiability"] = bounded_notes(names, bounded, prior_set)
             summary["parameters"] = bounded_summary(names, bounded, recording.rig)
         else:
-            if bound is not None:
-                summary["identifiability"] = _bound_notes(names, bound)
             summary["parameters"] = _laplace_summary(names, m, cov, recording.rig,
                                                      prior_set, bound, opt.seed)
         if cov is not None and bound is None:   # theta block: derived quantities need

@@ -161,14 +161,17 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
 def _cut_at_bounds(summary: dict[str, Any], post: JointLogPosterior, z: NDArray,
                    sigmas: list[NDArray], joint_names: list[str], rig: Any, seed: int) -> None:
     """A joint MAP with a coefficient on a prior bound: the Laplace approximation cut at the
-    prior (bounded.py, as identify reports a record's), when it can be formed there; else
-    the held coefficient keeps its prior's interval (_summary)."""
+    prior (bounded.py, as identify reports a record's) when every bound one is informed
+    and near it; else the held ones keep their prior's interval (_summary). The note says
+    which."""
     bl = bounded_laplace(post, np.concatenate([z, *sigmas]), seed)
     if bl is None or not bl.bound.any():
         return
     names = tuple(joint_names)
-    summary["parameters"] = bounded_summary(names, bl, rig)
-    summary["identifiability"] = bounded_notes(names, bl, post.priors)
+    cut = not bl.to_prior(post.priors).any()
+    if cut:
+        summary["parameters"] = bounded_summary(names, bl, rig)
+    summary["identifiability"] = bounded_notes(names, bl, post.priors, cut)
 
 
 def _sample(summary: dict[str, Any], likes: list, idx: list[NDArray], prior_set: PriorSet,
