@@ -159,3 +159,20 @@ def test_the_colour_measured_on_a_record_gives_the_spread_its_spectrum_gives(rig
     white_rec, _ = design_recording(*rig_ctrl, design, Noise(noise_rms=5e-8), seed=4)
     d = np.real(np.einsum("bii->b", noise_from(white_rec).colour.C)) / 4
     assert 0.8 < float(np.mean(d)) < 1.25
+
+
+def test_a_parameter_between_0_3_and_0_5_prior_sd_is_weakly_informed():
+    """Three coefficients of predicted sd 0.1, 0.2 and 0.3 under uniform(-0.8, 0.8) (prior
+    sd 0.46): informed with a first-order prediction, weakly informed (0.43 x the prior
+    sd: the prediction rough there), and not informed."""
+    from bayes_amb.planning.fisher import Information
+    from bayes_amb.planning.plan import informed_word, predicted_parameters
+    from bayes_amb.rig import load_rig
+
+    names = ("k_Ax", "k_Ay", "k_Bx")
+    info = Information(names=names, theta=np.zeros(3), log10_sigma=np.zeros(3),
+                       F=np.diag(1 / np.array([0.1, 0.2, 0.3]) ** 2), n_bins=100,
+                       f_max_hz=1000.0)
+    out = predicted_parameters(info, load_rig())
+    assert [informed_word(out[n]) for n in names] == ["yes", "weakly", "NO"]
+    assert [out[n]["first_order"] for n in names] == [True, False, False]

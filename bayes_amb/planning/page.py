@@ -9,6 +9,7 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb.io.atomic import write_text_atomic
+from bayes_amb.planning.plan import informed_word
 from bayes_amb.plots.planning import sd_against
 from bayes_amb.report.figures import render_figure
 
@@ -41,7 +42,7 @@ def write_plan_page(out: str | Path, plan: dict[str, Any],
                            + " (1: as white as identify's model)"])
     par_rows = [[n, f"{v['sd']:.3g}", f"{v['physical_sd']:.3g} {v['unit']}",
                  f"{v['sd_of_estimates']:.3g}", f"{v['prior_sd']:.3g}",
-                 "yes" if v["informed"] else "NO"] for n, v in plan["parameters"].items()]
+                 informed_word(v)] for n, v in plan["parameters"].items()]
     figs = [render_figure(sd_against(plan, k, targets), f"sd_{k}",
                           f"sd against {k}", "", vector=False) for k in ("duration",
                                                                          "amplitude")]
