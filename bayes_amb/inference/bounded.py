@@ -42,7 +42,7 @@ from bayes_amb.inference.estimate import (
     at_prior_bound,
     hessian_covariance,
 )
-from bayes_amb.uncertainty import get_spec
+from bayes_amb.inference.posterior import draws_row
 
 INWARD_STEPS = 2.5
 """How far (in Hessian steps) a bound coordinate is moved inward for the expansion (its
@@ -150,19 +150,7 @@ def bounded_summary(names: tuple[str, ...], bl: BoundedLaplace, rig: Any
                     ) -> dict[str, dict[str, Any]]:
     """identify's per-parameter summary from the truncated normal's draws: mean, sd and
     central 90 % interval, normalised and physical."""
-    out = {}
-    for j, n in enumerate(names):
-        spec = get_spec(n.split("@")[0])           # a joint per-record copy 'c_Ax@2'
-        scale = spec.physical_scale(rig)
-        v = bl.draws[:, j]
-        mean, sd = float(v.mean()), float(v.std())
-        lo, hi = (float(q) for q in np.quantile(v, [0.05, 0.95]))
-        out[n] = {"mean": mean, "sd": sd, "hdi90": [lo, hi], "ess_bulk": None,
-                  "ess_tail": None, "r_hat": None, "tau": None, "unit": spec.unit,
-                  "physical": spec.physical_label, "physical_mean": mean * scale,
-                  "physical_sd": sd * abs(scale),
-                  "physical_hdi90": sorted([lo * scale, hi * scale])}
-    return out
+    return {n: draws_row(n, rig, bl.draws[:, j]) for j, n in enumerate(names)}
 
 
 def bounded_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any, cut: bool

@@ -38,13 +38,20 @@ from bayes_amb.inference.estimate import (
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.posterior import (
+    approximate_row,
+    draws_row,
     identifiability,
     pointwise_log_likelihood,
     summarise,
     to_datatree,
 )
 from bayes_amb.inference.priors import Prior, PriorSet
-from bayes_amb.inference.sampler import initial_ball, run_emcee
+from bayes_amb.inference.sampler import (
+    chains_converged,
+    initial_ball,
+    run_emcee,
+    sampler_block,
+)
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.results.identification import FILE, Identification
@@ -125,27 +132,14 @@ def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | Non
     out = {}
     rng = np.random.default_rng(seed)
     for j, n in enumerate(names):
-        spec = get_spec(n)
-        scale = spec.physical_scale(rig)
         if bound is not None and prior_set is not None and bound[j]:
-            v = prior_set.priors[j].sample(rng, 20000)
-            mean, sd = float(v.mean()), float(v.std())
-            lo, hi = (float(q) for q in np.quantile(v, [0.05, 0.95]))
-            out[n] = {"mean": mean, "sd": sd, "hdi90": [lo, hi], "ess_bulk": None,
-                      "ess_tail": None, "r_hat": None, "tau": None, "unit": spec.unit,
-                      "physical": spec.physical_label, "physical_mean": mean * scale,
-                      "physical_sd": sd * abs(scale),
-                      "physical_hdi90": sorted([lo * scale, hi * scale])}
+            out[n] = draws_row(n, rig, prior_set.priors[j].sample(rng, 20000))
             continue
         sd = float(math.sqrt(cov[j, j])) if cov is not None else float("nan")
         mean, lo, hi = float(m.theta[j]), m.theta[j] - 1.6449 * sd, m.theta[j] + 1.6449 * sd
         if prior_set is not None:
             mean, sd, lo, hi = within_support(mean, sd, prior_set.priors[j].support)
-        out[n] = {"mean": mean, "sd": sd, "hdi90": [lo, hi], "ess_bulk": None,
-                  "ess_tail": None, "r_hat": None, "tau": None, "unit": spec.unit,
-                  "physical": spec.physical_label,
-                  "physical_mean": mean * scale, "physical_sd": sd * abs(scale),
-                  "physical_hdi90": sorted([lo * scale, hi * scale])}
+        out[n] = approximate_row(n, rig, mean, sd, float(lo), float(hi))
     return out
 
 
@@ -335,15 +329,9 @@ def identify(recording: Recording | list[Recording],
     summary["noise"]["posterior"] = noise_post
     summary["inference"] = "emcee posterior"
     summary["parameters"] = params_summary
-    summary["sampler"] = {"walkers": n_walkers, "moves": "laplace" if laplace else "de",
-                          "steps": run.n_steps, "burn": run.burn,
-                          "thin": run.thin, "n_tau": run.n_tau,
-                          "acceptance_mean": float(np.mean(run.acceptance)),
-                          "wall_s": run.wall_s, "likelihood_evals": post.n_evals}
+    summary["sampler"] = sampler_block(run, n_walkers, laplace is not None, post.n_evals)
     summary["identifiability"] = identifiability(run.samples, names, prior_set)
-    summary["converged"] = bool(
-        all(v["r_hat"] <= 1.01 and v["ess_bulk"] >= 400 for v in params_summary.values())
-        and run.n_tau >= 50)
+    summary["converged"] = chains_converged(params_summary, run)
     _with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
     return _result(summary, names, m, eps, like, posterior=dt, samples=run.samples)

@@ -28,7 +28,13 @@ from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.posterior import identifiability, summarise
 from bayes_amb.inference.priors import PriorSet, noise_log_prior
-from bayes_amb.inference.sampler import SamplerRun, initial_ball, run_emcee
+from bayes_amb.inference.sampler import (
+    SamplerRun,
+    chains_converged,
+    initial_ball,
+    run_emcee,
+    sampler_block,
+)
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
 
 START_NOISE_SD = 0.01
@@ -153,12 +159,8 @@ def sampled_summary(names: list[str], run: SamplerRun, n_walkers: int, used_lapl
     out = {
         "inference": "joint emcee posterior (each record's noise intensities sampled)",
         "parameters": params,
-        "sampler": {"walkers": n_walkers, "moves": "laplace" if used_laplace else "de",
-                    "steps": run.n_steps, "burn": run.burn, "thin": run.thin,
-                    "n_tau": run.n_tau, "acceptance_mean": float(np.mean(run.acceptance)),
-                    "wall_s": run.wall_s, "likelihood_evals": post.n_evals},
+        "sampler": sampler_block(run, n_walkers, used_laplace, post.n_evals),
         "identifiability": identifiability(run.samples, tuple(names), post.priors),
-        "converged": bool(all(v["r_hat"] <= 1.01 and v["ess_bulk"] >= 400
-                              for v in params.values()) and run.n_tau >= 50),
+        "converged": chains_converged(params, run),
     }
     return out, noise, dt

@@ -87,6 +87,24 @@ def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,
     return out
 
 
+def approximate_row(name: str, rig: Rig, mean: float, sd: float, lo: float, hi: float
+                    ) -> dict[str, Any]:
+    """A parameter's summary row from an approximation (no chains, so no ESS, R-hat or tau):
+    mean, sd and 90 % interval in theta units and physical ('c_Ax@2' in c_Ax's units)."""
+    spec = get_spec(name.split("@")[0])
+    scale = spec.physical_scale(rig)
+    return {"mean": mean, "sd": sd, "hdi90": [lo, hi], "ess_bulk": None, "ess_tail": None,
+            "r_hat": None, "tau": None, "unit": spec.unit, "physical": spec.physical_label,
+            "physical_mean": mean * scale, "physical_sd": sd * abs(scale),
+            "physical_hdi90": sorted([lo * scale, hi * scale])}
+
+
+def draws_row(name: str, rig: Rig, v: NDArray) -> dict[str, Any]:
+    """approximate_row of independent draws: their mean, sd and central 90 % interval."""
+    lo, hi = (float(q) for q in np.quantile(v, [0.05, 0.95]))
+    return approximate_row(name, rig, float(v.mean()), float(v.std()), lo, hi)
+
+
 def identifiability(samples: NDArray, names: tuple[str, ...], priors: PriorSet,
                     corr_limit: float = 0.9, shrink_limit: float = 0.5) -> dict[str, Any]:
     """Posterior correlations and plain-language warnings where the data do not pin a

@@ -17,6 +17,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import arviz as az
 import emcee
@@ -191,3 +192,18 @@ def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
     return SamplerRun(samples=samples, log_post=lp, tau=tau, n_steps=total, burn=burn,
                       thin=thin, acceptance=sampler.acceptance_fraction,
                       wall_s=time.perf_counter() - t0, n_tau=total / tau_max)
+
+
+def sampler_block(run: SamplerRun, n_walkers: int, used_laplace: bool, n_evals: int
+                  ) -> dict[str, Any]:
+    """The summary's 'sampler' entry of an emcee run."""
+    return {"walkers": n_walkers, "moves": "laplace" if used_laplace else "de",
+            "steps": run.n_steps, "burn": run.burn, "thin": run.thin, "n_tau": run.n_tau,
+            "acceptance_mean": float(np.mean(run.acceptance)), "wall_s": run.wall_s,
+            "likelihood_evals": n_evals}
+
+
+def chains_converged(params: dict[str, dict[str, Any]], run: SamplerRun) -> bool:
+    """Every parameter at R-hat <= 1.01 and bulk ESS >= 400, the chain 50 tau long."""
+    return bool(all(v["r_hat"] <= 1.01 and v["ess_bulk"] >= 400 for v in params.values())
+                and run.n_tau >= 50)
