@@ -28,7 +28,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("recording", metavar="NAME.csv", nargs="+",
                    help="the recording (NAME.json beside it); several give one joint "
                    "posterior of the shared coefficients (each record's own noise, speed, "
-                   "controller and dt; MAP with Laplace approximation)")
+                   "controller and dt; sampled as one record is, or MAP and Laplace with "
+                   "--map-only; RUN_DIR/joint.html too)")
     p.add_argument("--per-record", default="", metavar="NAMES",
                    help="with several recordings: parameters estimated per record, e.g. "
                    "c_Ax (reported as c_Ax@1, c_Ax@2, ...) (default: none, all shared)")
