@@ -223,20 +223,15 @@ def _check_locations(candidates: tuple[Candidate, ...], recording: Recording) ->
 
 
 @limited_threads
-def diagnose(recording: Recording | list[Recording],
-             params: str | tuple[str, ...] | list[str] | None = None,
+def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | None = None,
              priors: dict[str, Prior] | None = None,
-             options: DiagnoseOptions | None = None) -> Diagnosis | Any:
-    """Locate, explain and model the discrepancy between a recording and the nominal model;
-    given a list of recordings, each diagnosed and the effects tested across them
-    (records.diagnose_records, a RecordsDiagnosis).
+             options: DiagnoseOptions | None = None) -> Diagnosis:
+    """Locate, explain and model the discrepancy between a recording and the nominal model
+    (bayes_amb.api.diagnose also takes a list of recordings: records.diagnose_records).
 
     params: the bearing coefficients fitted in the nominal model (default: all eight, k_Ax
     .. c_By); any left out is itself a candidate, tried before any physics.
     """
-    if isinstance(recording, (list, tuple)):
-        from bayes_amb.discrepancy.records import diagnose_records
-        return diagnose_records(list(recording), params, priors, options)
     opt = options or DiagnoseOptions()
     t0 = time.perf_counter()
     require_excitation(recording)

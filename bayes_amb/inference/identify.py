@@ -197,22 +197,14 @@ def _bound_notes(names: tuple[str, ...], bound: np.ndarray) -> dict[str, Any]:
 
 
 @limited_threads
-def identify(recording: Recording | list[Recording],
-             params: str | tuple[str, ...] | list[str],
+def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
              priors: dict[str, Prior] | None = None,
-             options: IdentifyOptions | None = None,
-             per_record: tuple[str, ...] | list[str] = ()) -> Identification:
-    """MAP and emcee posterior of the named parameters from one recording; given a list of
-    recordings, their joint posterior (joint.identify_joint, ``per_record`` the parameters
-    estimated per record).
+             options: IdentifyOptions | None = None) -> Identification:
+    """MAP and emcee posterior of the named parameters from one recording (bayes_amb.api
+    .identify also takes a list, for their joint posterior).
 
     The recording's ``truth`` (if simulated) is never read here.
     """
-    if isinstance(recording, (list, tuple)):
-        from bayes_amb.inference.joint import identify_joint
-        return identify_joint(list(recording), params, priors, options, per_record)
-    if per_record:
-        raise BayesAmbError("option --per-record: needs several recordings")
     opt = options or IdentifyOptions()
     t0 = time.perf_counter()
     require_excitation(recording)
