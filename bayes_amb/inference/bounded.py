@@ -186,3 +186,23 @@ def bounded_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any, cut: 
     return {"identifiable": not (weak.any() or past.any()),
             "at_prior_bound": [names[j] for j in np.flatnonzero(bl.bound)],
             "past_prior_bound": [names[j] for j in np.flatnonzero(past)], "notes": notes}
+
+
+def sampled_bound_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any
+                        ) -> list[str]:
+    """Warnings for a sampled posterior whose MAP puts a coefficient on a prior bound that
+    the record does not inform or pushes past (``to_prior``): the draws are kept as they
+    are, but its interval is not to be read as the coefficient's value. On 41 foreign
+    process-force records the sampled intervals of such coefficients held the truth in
+    about half the cases; identify's MAP-only path reports their prior's interval."""
+    past, weak = bl.past_bound(), bl.weak(priors)
+    out = []
+    for j in np.flatnonzero(bl.to_prior(priors)):
+        why = ("the record pushes it past the prior" if past[j] else
+               "the record does not inform it" if weak[j] else "")
+        out.append(f"{names[j]} is not identified by these data: its MAP sits on the "
+                   f"prior's bound ({why}; alone it says {bl.center[j]:.3g} +- "
+                   f"{np.sqrt(bl.cov[j, j]):.2g}), so its sampled interval leans on the "
+                   "prior's bound and is not the coefficient's value (--map-only reports "
+                   "the prior's interval).")
+    return out

@@ -25,7 +25,12 @@ from bayes_amb.discrepancy.adequacy import assess_fit
 from bayes_amb.discrepancy.fitstats import draws, theta_summary
 from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference.bounded import bounded_laplace, bounded_notes, bounded_summary
+from bayes_amb.inference.bounded import (
+    bounded_laplace,
+    bounded_notes,
+    bounded_summary,
+    sampled_bound_notes,
+)
 from bayes_amb.inference.estimate import (
     LogPosterior,
     MapResult,
@@ -323,10 +328,25 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     summary["parameters"] = params_summary
     summary["sampler"] = sampler_block(run, n_walkers, laplace is not None, post.n_evals)
     summary["identifiability"] = identifiability(run.samples, names, prior_set)
+    _warn_bound(summary["identifiability"], post, x_map, names, prior_set, opt.seed)
     summary["converged"] = chains_converged(params_summary, run)
     _with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
     return _result(summary, names, m, eps, like, posterior=dt, samples=run.samples)
+
+
+def _warn_bound(ident: dict[str, Any], post: LogPosterior, x_map: np.ndarray,
+                names: tuple[str, ...], prior_set: PriorSet, seed: int) -> None:
+    """A sampled posterior whose MAP has a coefficient on a prior bound, not informed or
+    pushed past: say so (bounded.sampled_bound_notes); the draws are not changed."""
+    if not at_prior_bound(post, x_map)[:post.p].any():
+        return
+    bl = bounded_laplace(post, x_map, seed)
+    notes = [] if bl is None else sampled_bound_notes(names, bl, prior_set)
+    if notes:
+        ident["notes"] = [*ident["notes"], *notes]
+        ident["identifiable"] = False
+        ident["at_prior_bound"] = [names[j] for j in np.flatnonzero(bl.bound)]
 
 
 def _result(summary: dict[str, Any], names: tuple[str, ...], m: MapResult, eps: np.ndarray,
