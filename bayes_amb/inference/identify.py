@@ -338,15 +338,18 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
 def _warn_bound(ident: dict[str, Any], post: LogPosterior, x_map: np.ndarray,
                 names: tuple[str, ...], prior_set: PriorSet, seed: int) -> None:
     """A sampled posterior whose MAP has a coefficient on a prior bound, not informed or
-    pushed past: say so (bounded.sampled_bound_notes); the draws are not changed."""
+    pushed past: say so (bounded.sampled_bound_notes), unless the draws already said it is
+    not identified; the draws are not changed."""
     if not at_prior_bound(post, x_map)[:post.p].any():
         return
     bl = bounded_laplace(post, x_map, seed)
-    notes = [] if bl is None else sampled_bound_notes(names, bl, prior_set)
+    said = {n.split(" ")[0] for n in ident["notes"] if " is not identified" in n}
+    notes = [] if bl is None else [n for n in sampled_bound_notes(names, bl, prior_set)
+                                   if n.split(" ")[0] not in said]
     if notes:
         ident["notes"] = [*ident["notes"], *notes]
         ident["identifiable"] = False
-        ident["at_prior_bound"] = [names[j] for j in np.flatnonzero(bl.bound)]
+        ident["at_prior_bound"] = [n.split(" ")[0] for n in notes]
 
 
 def _result(summary: dict[str, Any], names: tuple[str, ...], m: MapResult, eps: np.ndarray,
