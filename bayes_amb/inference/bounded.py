@@ -64,15 +64,15 @@ not identified (the threshold of posterior.identifiability)."""
 
 @dataclass(frozen=True)
 class BoundedLaplace:
-    """The unconstrained normal (center, cov) of theta, the prior box (lo, hi), the mask of
-    the coordinates on a bound, and draws of the truncated normal (n, p)."""
+    """The unconstrained normal (center, cov) of theta, the prior box (lo, hi) and the mask
+    of the coordinates on a bound. The truncated normal is drawn only where its summary is
+    reported (bounded_summary)."""
 
     center: NDArray
     cov: NDArray
     lo: NDArray
     hi: NDArray
     bound: NDArray
-    draws: NDArray
 
     def past_bound(self) -> NDArray:
         """The bound coordinates whose unconstrained mean lies PAST_BOUND_SD sds past
@@ -95,7 +95,7 @@ class BoundedLaplace:
         return self.weak(priors) | self.past_bound()
 
 
-def bounded_laplace(post: Any, x: NDArray, seed: int = 0) -> BoundedLaplace | None:
+def bounded_laplace(post: Any, x: NDArray) -> BoundedLaplace | None:
     """The truncated Laplace approximation at x (theta, then log10 sigma held), or None
     when the expansion is not negative definite (module docstring). ``post``: a
     LogPosterior, or joint_sampling.JointLogPosterior (x then holds each record's noise)."""
@@ -115,8 +115,7 @@ def bounded_laplace(post: Any, x: NDArray, seed: int = 0) -> BoundedLaplace | No
         return None
     _, g = _grad(post, x_in, h / 10, idx)
     center = x_in[:p] + cov @ g
-    draws = truncated_normal_draws(center, cov, lo, hi, np.random.default_rng(seed))
-    return BoundedLaplace(center=center, cov=cov, lo=lo, hi=hi, bound=bound, draws=draws)
+    return BoundedLaplace(center=center, cov=cov, lo=lo, hi=hi, bound=bound)
 
 
 def truncated_normal_draws(center: NDArray, cov: NDArray, lo: NDArray, hi: NDArray,
@@ -146,11 +145,13 @@ def truncated_normal_draws(center: NDArray, cov: NDArray, lo: NDArray, hi: NDArr
     return x
 
 
-def bounded_summary(names: tuple[str, ...], bl: BoundedLaplace, rig: Any
+def bounded_summary(names: tuple[str, ...], bl: BoundedLaplace, rig: Any, seed: int = 0
                     ) -> dict[str, dict[str, Any]]:
-    """identify's per-parameter summary from the truncated normal's draws: mean, sd and
+    """identify's per-parameter summary from draws of the truncated normal: mean, sd and
     central 90 % interval, normalised and physical."""
-    return {n: draws_row(n, rig, bl.draws[:, j]) for j, n in enumerate(names)}
+    draws = truncated_normal_draws(bl.center, bl.cov, bl.lo, bl.hi,
+                                   np.random.default_rng(seed))
+    return {n: draws_row(n, rig, draws[:, j]) for j, n in enumerate(names)}
 
 
 def bounded_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any, cut: bool
@@ -195,11 +196,11 @@ def sampled_bound_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any
     are, but its interval is not to be read as the coefficient's value. On 41 foreign
     process-force records the sampled intervals of such coefficients held the truth in
     about half the cases; identify's MAP-only path reports their prior's interval."""
-    past, weak = bl.past_bound(), bl.weak(priors)
+    past = bl.past_bound()
     out = []
     for j in np.flatnonzero(bl.to_prior(priors)):
         why = ("the record pushes it past the prior" if past[j] else
-               "the record does not inform it" if weak[j] else "")
+               "the record does not inform it")
         out.append(f"{names[j]} is not identified by these data: its MAP sits on the "
                    f"prior's bound ({why}; alone it says {bl.center[j]:.3g} +- "
                    f"{np.sqrt(bl.cov[j, j]):.2g}), so its sampled interval leans on the "

@@ -238,7 +238,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         # one is informed and near it; else the others' over the free dimensions and the
         # bound ones' priors (_laplace_summary). With none on a bound the theta Hessian
         # is the one laplace_covariance tried.
-        bounded = bounded_laplace(post, x_map, opt.seed)
+        bounded = bounded_laplace(post, x_map)
         cut = bounded is not None and not bounded.to_prior(prior_set).any()
         if bounded is not None:
             notes = bounded_notes(names, bounded, prior_set, cut)
@@ -277,7 +277,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         if notes is not None or bound is not None:
             summary["identifiability"] = notes or _bound_notes(names, bound)
         if bounded is not None:
-            summary["parameters"] = bounded_summary(names, bounded, recording.rig)
+            summary["parameters"] = bounded_summary(names, bounded, recording.rig,
+                                                     opt.seed)
         else:
             summary["parameters"] = _laplace_summary(names, m, cov, recording.rig,
                                                      prior_set, bound, opt.seed)
@@ -328,7 +329,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     summary["parameters"] = params_summary
     summary["sampler"] = sampler_block(run, n_walkers, laplace is not None, post.n_evals)
     summary["identifiability"] = identifiability(run.samples, names, prior_set)
-    _warn_bound(summary["identifiability"], post, x_map, names, prior_set, opt.seed)
+    _warn_bound(summary["identifiability"], post, x_map, names, prior_set)
     summary["converged"] = chains_converged(params_summary, run)
     _with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
@@ -336,13 +337,13 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
 
 
 def _warn_bound(ident: dict[str, Any], post: LogPosterior, x_map: np.ndarray,
-                names: tuple[str, ...], prior_set: PriorSet, seed: int) -> None:
+                names: tuple[str, ...], prior_set: PriorSet) -> None:
     """A sampled posterior whose MAP has a coefficient on a prior bound, not informed or
     pushed past: say so (bounded.sampled_bound_notes), unless the draws already said it is
     not identified; the draws are not changed."""
     if not at_prior_bound(post, x_map)[:post.p].any():
         return
-    bl = bounded_laplace(post, x_map, seed)
+    bl = bounded_laplace(post, x_map)
     said = {n.split(" ")[0] for n in ident["notes"] if " is not identified" in n}
     notes = [] if bl is None else [n for n in sampled_bound_notes(names, bl, prior_set)
                                    if n.split(" ")[0] not in said]

@@ -164,13 +164,13 @@ def _cut_at_bounds(summary: dict[str, Any], post: JointLogPosterior, z: NDArray,
     prior (bounded.py, as identify reports a record's) when every bound one is informed
     and near it; else the held ones keep their prior's interval (_summary). The note says
     which."""
-    bl = bounded_laplace(post, np.concatenate([z, *sigmas]), seed)
+    bl = bounded_laplace(post, np.concatenate([z, *sigmas]))
     if bl is None or not bl.bound.any():
         return
     names = tuple(joint_names)
     cut = not bl.to_prior(post.priors).any()
     if cut:
-        summary["parameters"] = bounded_summary(names, bl, rig)
+        summary["parameters"] = bounded_summary(names, bl, rig, seed)
     summary["identifiability"] = bounded_notes(names, bl, post.priors, cut)
 
 
