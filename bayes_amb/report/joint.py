@@ -16,14 +16,11 @@ bayes_amb.results.Identification) and shows, without recomputing anything estima
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from pathlib import Path
 
-from bayes_amb import __version__
-from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.report.collect import ReportError
 from bayes_amb.report.records import forest_figure, record_labels
-from bayes_amb.report.render import render_html
+from bayes_amb.report.render import write_page
 from bayes_amb.report.sections import Section, Table, g
 from bayes_amb.results.identification import Identification
 
@@ -105,13 +102,5 @@ def write_joint_report(run_dir: str | Path, out_dir: str | Path | None = None) -
     """Write OUT/joint.html (OUT defaults to the run folder) for a run folder of
     ``identify REC1 REC2 ... --out DIR``; returns its path."""
     res = Identification.load(run_dir)
-    sections = joint_sections(res)
-    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
-    meta = {"title": f"Joint identification of {len(res.records or [])} records",
-            "subtitle": f"Run folder {Path(run_dir).name}; made {now} by bayes-amb "
-                        f"{__version__}", "notes": []}
-    out = Path(out_dir or run_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "joint.html"
-    write_text_atomic(path, render_html(sections, meta))
-    return path
+    return write_page(joint_sections(res), f"Joint identification of {len(res.records or [])} "
+                      "records", run_dir, out_dir, "joint.html")

@@ -18,18 +18,15 @@ without recomputing anything estimated:
 
 from __future__ import annotations
 
-from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from bayes_amb import __version__
 from bayes_amb.inference.consistency import agreement
-from bayes_amb.io.atomic import write_text_atomic
 from bayes_amb.report import figures as fg
 from bayes_amb.report.collect import ReportError
-from bayes_amb.report.render import render_html
+from bayes_amb.report.render import write_page
 from bayes_amb.report.sections import Section, Table, g
 from bayes_amb.results.diagnosis import Diagnosis
 
@@ -236,14 +233,5 @@ def write_records_report(run_dir: str | Path, out_dir: str | Path | None = None)
     """Write OUT/records.html (OUT defaults to the run folder) for a run folder of
     ``diagnose REC1 REC2 ... --out DIR``; returns its path."""
     result = collect_records(run_dir)
-    reports = result.diagnoses
-    sections = records_sections(result)
-    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
-    meta = {"title": f"Diagnosis across {len(reports)} records",
-            "subtitle": f"Run folder {Path(run_dir).name}; made {now} by bayes-amb "
-                        f"{__version__}", "notes": []}
-    out = Path(out_dir or run_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / "records.html"
-    write_text_atomic(path, render_html(sections, meta))
-    return path
+    return write_page(records_sections(result), f"Diagnosis across {len(result.diagnoses)} "
+                      "records", run_dir, out_dir, "records.html")

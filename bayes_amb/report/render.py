@@ -76,6 +76,20 @@ def render_html(sections: list[Section], meta: dict[str, Any], pdf: bool = False
         sections=sections, meta=meta, pdf=pdf)
 
 
+def write_page(sections: list[Section], title: str, run_dir: str | Path,
+               out_dir: str | Path | None, name: str) -> Path:
+    """Write one HTML page of ``sections`` to OUT/name (OUT defaults to the run folder),
+    titled ``title`` with the run folder and the time it was made; returns its path."""
+    now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
+    meta = {"title": title, "subtitle": f"Run folder {Path(run_dir).name}; made {now} by "
+                                        f"bayes-amb {__version__}", "notes": []}
+    out = Path(out_dir or run_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / name
+    write_text_atomic(path, render_html(sections, meta))
+    return path
+
+
 class _QuietFonts(logging.Filter):
     """Drop WeasyPrint's advice to install HarfBuzz-Subset (fonts are embedded anyway)."""
 
