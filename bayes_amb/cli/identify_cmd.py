@@ -99,6 +99,8 @@ def format_summary(s: Identification) -> str:
                                                   for k, v in s.noise.map.items()))
     for note in (s.identifiability or {}).get("notes", []):
         lines.append(f"warning: {note}")
+    if s.noise is not None and s.noise.check is not None and s.noise.check.doubted:
+        lines.append(f"noise: {s.noise.check.line}")
     if s.adequacy is not None:
         lines.append(f"adequacy: {s.adequacy.line}")
     return "\n".join(lines)
@@ -121,6 +123,8 @@ def format_joint(s: Identification) -> str:
         noise = ", ".join(f"{k} {v.value:.3g} {v.unit}" for k, v in r.noise.items())
         lines.append(f"record {i}: {r.recording}, {r.speed_rpm:g} rpm, dt {r.dt:g} s; "
                      f"noise (MAP) {noise}")
+        if r.noise_check is not None and r.noise_check.doubted:
+            lines.append(f"record {i} noise: {r.noise_check.line}")
     for note in (s.identifiability or {}).get("notes", []):
         lines.append(f"warning: {note}")
     if s.agreement is not None and not s.agreement.disagree:

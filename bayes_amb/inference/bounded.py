@@ -191,11 +191,11 @@ def bounded_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any, cut: 
 
 def sampled_bound_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any
                         ) -> list[str]:
-    """Warnings for a sampled posterior whose MAP puts a coefficient on a prior bound that
-    the record does not inform or pushes past (``to_prior``): the draws are kept as they
-    are, but its interval is not to be read as the coefficient's value. On 41 foreign
-    process-force records the sampled intervals of such coefficients held the truth in
-    about half the cases; identify's MAP-only path reports their prior's interval."""
+    """Notes for a sampled posterior whose MAP puts a coefficient on a prior bound that
+    the record does not inform or pushes past (``to_prior``): its draws lean on the bound
+    and are not the coefficient's value, so identify reports its prior's interval, as the
+    MAP-only path does. On 41 foreign process-force records the sampled intervals of such
+    coefficients held the truth in about half the cases."""
     past = bl.past_bound()
     out = []
     for j in np.flatnonzero(bl.to_prior(priors)):
@@ -203,7 +203,6 @@ def sampled_bound_notes(names: tuple[str, ...], bl: BoundedLaplace, priors: Any
                "the record does not inform it")
         out.append(f"{names[j]} is not identified by these data: its MAP sits on the "
                    f"prior's bound ({why}; alone it says {bl.center[j]:.3g} +- "
-                   f"{np.sqrt(bl.cov[j, j]):.2g}), so its sampled interval leans on the "
-                   "prior's bound and is not the coefficient's value (--map-only reports "
-                   "the prior's interval).")
+                   f"{np.sqrt(bl.cov[j, j]):.2g}); its draws lean on that bound, so the "
+                   "interval reported is the prior's.")
     return out

@@ -46,9 +46,16 @@ from bayes_amb.inference.identify import (
     identify,
 )
 from bayes_amb.inference.joint_sampling import JointLogPosterior, sample_joint, sampled_summary
+from bayes_amb.inference.noise_check import NoiseCheck, joint_check, noise_check, sandwich_rows
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.io.recording import Recording
-from bayes_amb.results.identification import FILE, Identification, NoisePosterior, RecordFit
+from bayes_amb.results.identification import (
+    FILE,
+    Identification,
+    NoisePosterior,
+    RecordFit,
+)
+from bayes_amb.results.identification import NoiseCheck as NoiseCheckBlock
 from bayes_amb.uncertainty import parse_param_list
 
 STEP = 1e-4
@@ -141,12 +148,24 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         "converged": bool(res.success and cov is not None),
         "seed": opt.seed,
     }
+    checks = [noise_check(like, z[ix], ls, names)
+              for like, ls, ix in zip(likes, sigmas, idx, strict=True)]
+    summary["records"] = [replace(block, noise_check=None if c is None else NoiseCheckBlock(
+        **{**c.to_dict(), "line": c.finding + (": its B - F enters the joint sandwich."
+                                               if c.doubted else ".")}))
+        for block, c in zip(summary["records"], checks, strict=True)]
+    check = joint_check(checks, idx, joint_names)
+    if check is not None and cov is not None:
+        wide, check = check.sandwich(cov)
+        summary["parameters_white_noise"] = summary["parameters"]
+        summary["parameters"] = _summary(joint_names, m, wide, rig, prior_set, bounds)
     if any(_on_bound(v, b) for v, b in zip(z, bounds, strict=True)):
         _cut_at_bounds(summary, JointLogPosterior(likes, idx, prior_set), z, sigmas,
                        joint_names, rig, opt.seed)
     more: dict[str, Any] = {}
     if not opt.map_only:
-        more = _sample(summary, likes, idx, prior_set, z, cov, sigmas, opt, recordings)
+        more = _sample(summary, likes, idx, prior_set, z, cov, sigmas, opt, recordings,
+                       check, bounds)
     inadequate = [i for i, o in enumerate(own) if o.adequacy is not None
                   and not o.adequacy.adequate]
     summary["adequacy"] = _joint_adequacy(own, inadequate)
@@ -176,9 +195,11 @@ def _cut_at_bounds(summary: dict[str, Any], post: JointLogPosterior, z: NDArray,
 
 def _sample(summary: dict[str, Any], likes: list, idx: list[NDArray], prior_set: PriorSet,
             z: NDArray, cov: NDArray | None, sigmas: list[NDArray], opt: IdentifyOptions,
-            recordings: list[Recording]) -> dict[str, Any]:
+            recordings: list[Recording], check: NoiseCheck | None = None,
+            bounds: list | None = None) -> dict[str, Any]:
     """emcee on the joint posterior (joint_sampling.py): its summary entries replace the
-    Laplace ones; returns the draws for the result."""
+    Laplace ones (the draws stretched to the records' noise sandwich where ``check`` has
+    one, noise_check.py); returns the draws for the result."""
     post = JointLogPosterior(likes, idx, prior_set)
     run, n_walkers, used = sample_joint(post, z, cov, sigmas, opt.walkers, opt.steps,
                                         opt.max_steps, opt.seed, opt.progress)
@@ -188,6 +209,11 @@ def _sample(summary: dict[str, Any], likes: list, idx: list[NDArray], prior_set:
     found, noise, dt = sampled_summary(summary["parameters_estimated"], run, n_walkers, used,
                                        post, recordings[0].rig, attrs)
     summary.update(found)
+    summary.pop("parameters_white_noise", None)
+    if check is not None:
+        rows, _, _ = sandwich_rows(check, run, bounds, recordings[0].rig, found["parameters"])
+        summary["parameters_white_noise"] = found["parameters"]
+        summary["parameters"] = rows
     summary["records"] = [replace(block, noise_posterior={k: NoisePosterior(**v)
                                                           for k, v in rows.items()})
                           for block, rows in zip(summary["records"], noise, strict=True)]

@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from bayes_amb.inference.noise_check import band_colour, white_spectrum
 from bayes_amb.inference.whittle import WhittleLikelihood
 
 
@@ -63,25 +64,11 @@ class NoiseColour:
                 "high_third": [float(v) for v in d[-third:].mean(axis=0)]}
 
 
-def white_spectrum(like: WhittleLikelihood, log10_sigma: NDArray) -> NDArray:
-    """N Phi_b (n_bands, 4, 4) of the white sources at log10_sigma (the likelihood's own
-    noise model, prewhitening and scale included)."""
-    sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
-    return np.einsum("s,sbcd->bcd", sig2, like.phi_sources) * like.n
-
-
 def measure_colour(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
                    source: str = "") -> NoiseColour:
     """The colour of the residual of ``like`` at (theta, log10_sigma): identify's MAP on
     the recording whose noise is measured."""
-    R, stable = like.residual_dft(np.atleast_2d(np.asarray(theta, dtype=float)))
-    if not stable[0]:
-        raise ValueError("the model is not stabilised at the fitted parameters")
-    P = like._band_sums(R)[0] / like.counts[:, None, None]
-    L = np.linalg.cholesky(white_spectrum(like, log10_sigma))
-    Li = np.linalg.inv(L)
-    C = Li @ P @ np.conj(np.swapaxes(Li, -1, -2))
-    C = 0.5 * (C + np.conj(np.swapaxes(C, -1, -2)))
+    C, _ = band_colour(like, theta, log10_sigma)
     return NoiseColour(f_hz=np.asarray(like.band_freq_hz, dtype=float), C=C, source=source)
 
 

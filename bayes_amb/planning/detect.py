@@ -34,10 +34,11 @@ from scipy.signal import lfilter
 
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.noise_check import residual_jacobian
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.io.controller_file import ControllerFile
-from bayes_amb.planning.fisher import log10_sigma_of, residual_jacobian
+from bayes_amb.planning.fisher import log10_sigma_of
 from bayes_amb.planning.plan import BEARING_COEFFICIENTS, Design, Noise
 from bayes_amb.rig import Rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording

@@ -25,14 +25,12 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize
 
 from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.noise_check import residual_jacobian
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.io.recording import Recording
 from bayes_amb.planning.colour import NoiseColour, coloured_spectrum
-
-STEP = 1e-4
-"""Central-difference step of the Jacobian (theta units; S is smooth in theta)."""
 
 
 @dataclass(frozen=True)
@@ -97,20 +95,6 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     return Information(tuple(names), theta, np.asarray(log10_sigma, dtype=float),
                        0.5 * (F + F.T), int(like.k.size), like.f_max_hz,
                        B=0.5 * (B + B.T), log10_sigma_model=ls_model)
-
-
-def residual_jacobian(like: WhittleLikelihood, theta: NDArray) -> NDArray:
-    """dR_k/dtheta (nf, 4, p) of the likelihood's residual DFT at theta, by central
-    differences of step STEP."""
-    p = theta.size
-    rows = np.tile(theta, (2 * p, 1))
-    for j in range(p):
-        rows[2 * j, j] += STEP
-        rows[2 * j + 1, j] -= STEP
-    R, stable = like.residual_dft(rows)
-    if not np.all(stable):
-        raise ValueError("the controller does not stabilise the model next to theta")
-    return np.stack([(R[2 * j] - R[2 * j + 1]) / (2 * STEP) for j in range(p)], axis=-1)
 
 
 def _spectrum(like: WhittleLikelihood, sig2_band: NDArray) -> NDArray:

@@ -81,12 +81,31 @@ class NoisePosterior(Block):
 
 
 @block
+class NoiseCheck(Block):
+    """Is the residual as white as the noise model has it (inference/noise_check.py)? The
+    whiteness test (statistic, degrees of freedom, p value; ``doubted`` below 1e-3), the
+    segments of most and least colour [f_lo, f_hi, residual power over the model's], and
+    where doubted, each parameter's sandwich sd over the white model's (``sd_ratio``; the
+    intervals are then the sandwich's)."""
+
+    doubted: bool
+    p_value: float
+    statistic: float
+    dof: int
+    bands_hz: list[list[float]]
+    line: str
+    sd_ratio: dict[str, float] | None = omitted()
+
+
+@block
 class Noise(Block):
-    """The noise model and its intensities (MAP; posterior after sampling)."""
+    """The noise model and its intensities (MAP; posterior after sampling), and the check
+    of its whiteness on the record."""
 
     model: str
     map: dict[str, NoiseValue]
     posterior: dict[str, NoisePosterior] | None = omitted()
+    check: NoiseCheck | None = omitted()
 
 
 @block
@@ -126,6 +145,7 @@ class RecordFit(Block):
     adequacy: Adequacy | None = None
     parameters: dict[str, Posterior]
     noise_posterior: dict[str, NoisePosterior] | None = omitted()
+    noise_check: NoiseCheck | None = omitted()
 
 
 @block
@@ -158,6 +178,7 @@ class Identification(Block):
     identifiability: dict[str, Any] | None = omitted()
     agreement: Agreement | None = omitted()
     inference_note: str | None = omitted()
+    parameters_white_noise: dict[str, Posterior] | None = omitted()
     parameters_model_only: dict[str, Posterior] | None = omitted()
     parameters_from: str | None = omitted()
     wall_s: float | None = omitted()
