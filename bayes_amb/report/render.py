@@ -277,6 +277,9 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
                    f"model: {adequacy}"]
     else:
         bullets = [f"Adequacy of the model: {adequacy}"] if adequacy else []
+    check = s.noise.check if s.noise is not None else None
+    if check is not None and check.doubted:
+        bullets.append(f"Noise: {check.line}")
     named = [e.description for e in dg.explanations] if dg is not None else []
     after = dg.parameters_after if dg is not None else {}
     if named and after:

@@ -287,6 +287,10 @@ def identification_section(run: RunData, d: dv.Derived | None, opts: ReportOptio
     if run.posterior is None:
         paras.append("No posterior.nc in the run folder (MAP-only run): the intervals are "
                      "the Laplace approximation, and no sampler diagnostics are shown.")
+    elif s.parameters_white_noise is not None:
+        paras.append("The residual's noise is not white as the likelihood models it (see "
+                     "Summary): the intervals in the tables are the sandwich's, while the "
+                     "figures show the draws as sampled under the white model.")
     return _section("identification", paragraphs=paras, bullets=list(ident.get("notes", [])),
                     tables=tables, figures=fg.identification_figures(
                         run, d, np.random.default_rng(opts.seed)))
