@@ -69,9 +69,16 @@ def joint_sections(res: Identification) -> list[Section]:
     lines = [f"{n} records, one posterior: {res.inference}; "
              f"{'converged' if res.converged else 'NOT converged'}."]
     if res.agreement is not None:
-        lines.append(res.agreement.line[:1].upper() + res.agreement.line[1:] + ".")
+        line = res.agreement.line.rstrip(".")
+        lines.append(line[:1].upper() + line[1:] + ".")
     bullets = [] if res.adequacy is None else [f"Adequacy: {res.adequacy.line}"]
     bullets += [f"Warning: {note}" for note in (res.identifiability or {}).get("notes", [])]
+    bullets += [f"Noise of record {i}: {r.noise_check.line}"
+                for i, r in enumerate(res.records, 1)
+                if r.noise_check is not None and r.noise_check.doubted]
+    if res.parameters_white_noise is not None:
+        bullets.append("The joint intervals are the sandwich of the records' measured noise "
+                       "(the white model's under parameters_white_noise in summary.json).")
     summary = Section("summary", "Summary", paragraphs=lines, bullets=bullets,
                       tables=[_parameters_table(res), _records_table(res)])
     names = [k for k in res.records[0].parameters
