@@ -21,6 +21,7 @@ from bayes_amb.discrepancy.locate import (
     whiten,
     whitened_series,
 )
+from bayes_amb.inference.posterior import stretch_draws
 from bayes_amb.rig import CHANNELS
 from bayes_amb.uncertainty import get_spec
 
@@ -66,7 +67,7 @@ def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
         if (me is not None or extra is not None) and fitted.cov is not None:
             target = (me.cov[:p, :p] if me is not None else fitted.cov[:p, :p]) + (
                 0.0 if extra is None else extra)
-            d = _stretch(d, fitted.params, fitted.cov[:p, :p], target) + (
+            d = stretch_draws(d, fitted.params, fitted.cov[:p, :p], target) + (
                 me.shift if me is not None else 0.0)
     else:
         rng = np.random.default_rng(seed)
@@ -94,23 +95,6 @@ def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
             # the prior
             d[:, j] = rng.uniform(lo, hi, d.shape[0])
     return d
-
-
-def _stretch(d: NDArray, centre: NDArray, cov: NDArray, cov_new: NDArray) -> NDArray:
-    """Draws d moved so that their spread about centre goes from cov to cov_new (free
-    dimensions only: those with positive variance in cov)."""
-    free = np.flatnonzero(np.diag(cov) > 0)
-    if free.size == 0:
-        return d
-    try:
-        K = np.linalg.cholesky(cov[np.ix_(free, free)])
-        Kw = np.linalg.cholesky(cov_new[np.ix_(free, free)])
-    except np.linalg.LinAlgError:
-        return d
-    out = d.copy()
-    dev = d[:, free] - centre[free]
-    out[:, free] = centre[free] + np.linalg.solve(K, dev.T).T @ Kw.T
-    return out
 
 
 def theta_summary(fitted: FittedModel, samples: NDArray,

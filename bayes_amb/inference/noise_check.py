@@ -48,7 +48,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayes_amb.inference.posterior import summarise
+from bayes_amb.inference.posterior import stretch_draws, summarise
 from bayes_amb.inference.sampler import SamplerRun
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.rig import Rig
@@ -256,14 +256,8 @@ def sandwich_draws(check: NoiseCheck, samples: NDArray, bounds: list[tuple[Any, 
     mean = flat.mean(axis=0)
     base = np.atleast_2d(np.cov(flat.T))
     wide, check = check.sandwich(base)
-    free = np.flatnonzero(np.diag(base) > 0)
     out = samples.copy()
-    if free.size:
-        K = np.linalg.cholesky(base[np.ix_(free, free)])
-        Kw = np.linalg.cholesky(wide[np.ix_(free, free)])
-        dev = samples[..., free] - mean[free]
-        out[..., free] = mean[free] + np.linalg.solve(K, dev.reshape(-1, free.size).T
-                                                      ).T.reshape(dev.shape) @ Kw.T
+    out[..., :p] = stretch_draws(samples[..., :p], mean, base, wide)
     for j, (lo, hi) in enumerate(bounds):
         out[..., j] = np.clip(out[..., j], -np.inf if lo is None else lo,
                               np.inf if hi is None else hi)

@@ -87,6 +87,25 @@ def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,
     return out
 
 
+def stretch_draws(d: NDArray, centre: NDArray, cov: NDArray, cov_new: NDArray) -> NDArray:
+    """Draws d (..., p) moved so that their spread about centre goes from cov to cov_new
+    (the open-faced sandwich adjustment of Shaby 2014; free dimensions only: those with
+    positive variance in cov). Any leading shape (walkers, draws) is kept."""
+    free = np.flatnonzero(np.diag(cov) > 0)
+    if free.size == 0:
+        return d
+    try:
+        K = np.linalg.cholesky(cov[np.ix_(free, free)])
+        Kw = np.linalg.cholesky(cov_new[np.ix_(free, free)])
+    except np.linalg.LinAlgError:
+        return d
+    out = np.array(d, dtype=float, copy=True)
+    dev = (d[..., free] - centre[free]).reshape(-1, free.size)
+    out[..., free] = (centre[free] + np.linalg.solve(K, dev.T).T @ Kw.T).reshape(
+        *d.shape[:-1], free.size)
+    return out
+
+
 def approximate_row(name: str, rig: Rig, mean: float, sd: float, lo: float, hi: float
                     ) -> dict[str, Any]:
     """A parameter's summary row from an approximation (no chains, so no ESS, R-hat or tau):
