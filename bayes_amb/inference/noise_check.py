@@ -30,12 +30,11 @@ the model is doubted at p < P_DOUBT. C_new may be narrower than C in some direct
 the model puts noise the record does not have (a force at one disc makes the white model
 give the far bearing the near one's noise).
 
-Measured on foreign records (the benchmark's generator, 8 coefficients, MAP only; scratch
-study colour_sw at MIN_BINS 32): under a process force at the discs (160 records) the
+Measured on foreign records (the benchmark's generator, eight coefficients, MAP only;
+studies/noise_check_foreign.py): under a process force at the discs (160 records) the
 sandwich sd was 0.4-2.1 x the white model's, and the 90 % intervals held the truth in
-1096/1162 against 1080/1162 (coefficients not on a prior bound); where the sandwich widened
-by more than 1.25 x, 97.0 % against 85.3 %; where it narrowed below 0.8 x, 91.1 % against
-99.5 %.
+1207/1280 against 1195/1280 (k_Bx 151 against 138 of 160); where the sandwich widened by
+more than 1.25 x, 97 % against 85 %; where it narrowed below 0.8 x, 89 % against 99 %.
 """
 
 from __future__ import annotations
