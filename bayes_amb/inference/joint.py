@@ -209,7 +209,6 @@ def _sample(summary: dict[str, Any], likes: list, idx: list[NDArray], prior_set:
     found, noise, dt = sampled_summary(summary["parameters_estimated"], run, n_walkers, used,
                                        post, recordings[0].rig, attrs)
     summary.update(found)
-    summary.pop("parameters_white_noise", None)
     if check is not None:
         rows, _, _ = sandwich_rows(check, run, bounds, recordings[0].rig, found["parameters"])
         summary["parameters_white_noise"] = found["parameters"]

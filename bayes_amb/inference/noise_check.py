@@ -95,9 +95,20 @@ def band_colour(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray
                 ) -> tuple[NDArray, NDArray]:
     """Per band the residual's whitened periodogram mean C_b (n_bands, 4, 4) at (theta,
     log10_sigma), and the Cholesky factors L_b of the model's N Phi_b."""
+    return _whitened(like, _residual(like, theta), log10_sigma)
+
+
+def _residual(like: WhittleLikelihood, theta: NDArray) -> NDArray:
+    """The residual DFT (1, nf, 4) at theta, which must be stabilised."""
     R, stable = like.residual_dft(np.atleast_2d(np.asarray(theta, dtype=float)))
     if not stable[0]:
         raise ValueError("the model is not stabilised at the fitted parameters")
+    return R
+
+
+def _whitened(like: WhittleLikelihood, R: NDArray, log10_sigma: NDArray
+              ) -> tuple[NDArray, NDArray]:
+    """band_colour of the residual DFT R (1, nf, 4)."""
     P = like._band_sums(R)[0] / like.counts[:, None, None]
     L = np.linalg.cholesky(white_spectrum(like, log10_sigma))
     Li = np.linalg.inv(L)
@@ -212,9 +223,10 @@ def noise_check(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
     if like.noise_model != "loop":
         return None
     theta = np.asarray(theta, dtype=float)
-    if like.sum_squares(theta)[0] <= ROUNDING**2 * float(np.sum(np.abs(like.E) ** 2)):
+    R = _residual(like, theta)
+    if np.sum(np.abs(R) ** 2) <= ROUNDING**2 * float(np.sum(np.abs(like.E) ** 2)):
         return None                     # a residual of rounding: no noise to test
-    Cb, L = band_colour(like, theta, log10_sigma)
+    Cb, L = _whitened(like, R, log10_sigma)
     groups = segments(like.counts, min_bins)
     colour = np.empty_like(Cb)
     stat = 0.0
