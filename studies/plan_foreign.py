@@ -24,9 +24,28 @@ from pathlib import Path
 
 import numpy as np
 
-from bayes_amb.io.recording import load_recording
-from bayes_amb.planning import Design, Noise, plan
+from bayes_amb.io.recording import Recording, load_recording
+from bayes_amb.planning import Design, Noise, Plan, plan
 from bayes_amb.planning.plan import BEARING_COEFFICIENTS, noise_from
+
+
+def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True) -> Plan:
+    """The plan a user with this record makes for a record like it: its rig, controller,
+    speed and dt, its excitation (a random binary of its amplitude at its port, on the
+    channels it excites, its length), its noise as --noise-from takes it (--white: the
+    white intensities identify fitted, ``s`` being identify's summary), at identify's MAP
+    (``at_map``) or the nominal."""
+    x = next(iter(rec.excitation.values()))
+    n = s["noise"]["map"]
+    live = tuple(c for c, v in zip(("Ax", "Ay", "Bx", "By"), np.abs(x).max(axis=0),
+                                   strict=True) if v > 0)
+    design = Design(excitation="random-binary", amplitude=float(np.max(np.abs(x))),
+                    duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"],
+                    channels=None if len(live) == 4 else live)
+    noise = (Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
+                   r2_rms=n["sigma_r2"]["value"]) if white else noise_from(rec))
+    at = s["map"] if at_map else None     # the user's estimate from that record
+    return plan(rec.rig, rec.controller, design, noise, speed_rpm=rec.speed_rpm, theta=at)
 
 
 def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False,
@@ -38,17 +57,7 @@ def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False
             continue
         s = json.loads(ident.read_text())
         rec = load_recording(run / "recordings" / f"{name}.csv")
-        x = next(iter(rec.excitation.values()))
-        n = s["noise"]["map"]
-        live = tuple(c for c, v in zip(("Ax", "Ay", "Bx", "By"), np.abs(x).max(axis=0),
-                                       strict=True) if v > 0)
-        design = Design(excitation="random-binary", amplitude=float(np.max(np.abs(x))),
-                        duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"],
-                        channels=None if len(live) == 4 else live)
-        noise = (Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
-                       r2_rms=n["sigma_r2"]["value"]) if white else noise_from(rec))
-        at = s["map"] if at_map else None     # the user's estimate from that record
-        p = plan(rec.rig, rec.controller, design, noise, speed_rpm=rec.speed_rpm, theta=at)
+        p = user_plan(rec, s, white, at_map)
         truth = json.loads((run / "recordings" / f"{name}.truth.json").read_text())["theta"]
         par = s.get("parameters_model_only", s["parameters"])
         if any(par[k]["sd"] is None for k in BEARING_COEFFICIENTS):
