@@ -136,6 +136,19 @@ def segments(counts: NDArray, min_bins: int = MIN_BINS) -> list[NDArray]:
     return [np.array(g) for g in out]
 
 
+def segment_colour(counts: NDArray, Cb: NDArray, min_bins: int = MIN_BINS
+                   ) -> tuple[NDArray, list[NDArray]]:
+    """Per band the bin-weighted mean of the colour C_b (n_bands, 4, 4) over its segment
+    (:func:`segments`; a band of one bin alone has a rank-one colour of relative error 1),
+    and the segments."""
+    groups = segments(counts, min_bins)
+    colour = np.empty_like(Cb)
+    for g in groups:
+        n_s = counts[g]
+        colour[g] = np.tensordot(n_s, Cb[g], axes=(0, 0)) / n_s.sum()
+    return colour, groups
+
+
 @dataclass(frozen=True)
 class NoiseCheck:
     """The whiteness test and the sandwich of one record's fit (module docstring).
@@ -227,14 +240,12 @@ def noise_check(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
     if np.sum(np.abs(R) ** 2) <= ROUNDING**2 * float(np.sum(np.abs(like.E) ** 2)):
         return None                     # a residual of rounding: no noise to test
     Cb, L = _whitened(like, R, log10_sigma)
-    groups = segments(like.counts, min_bins)
-    colour = np.empty_like(Cb)
+    colour, groups = segment_colour(like.counts, Cb, min_bins)
     stat = 0.0
     rows = []
     for g in groups:
         n_s = like.counts[g]
-        Cs = np.tensordot(n_s, Cb[g], axes=(0, 0)) / n_s.sum()
-        colour[g] = Cs
+        Cs = colour[g[0]]
         stat += float(n_s.sum() * np.sum(np.abs(Cs - np.eye(4)) ** 2))
         f = like.band_freq_hz[g]
         rows.append([float(f[0]), float(f[-1]), float(np.real(np.trace(Cs)) / 4)])
