@@ -36,7 +36,8 @@ FIRST_ORDER = 0.3
 record informs the parameter weakly, and the first-order prediction is rough. On 160
 foreign process-force records every informed coefficient fell there (0.3-0.5 x the prior
 sd); the estimates' scatter about the truth was 0.67-1.12 of the predicted sd, heavy
-tailed (robust scale 0.51-0.84). Below it, on 200 one-channel records, 0.82-1.00."""
+tailed (robust scale 0.51-0.84). Below it, on 200 one-channel records, 0.82-1.00 against
+the white model's sd; against the sandwich identify now reports, 0.70-0.92 (conservative)."""
 
 
 @dataclass(frozen=True)
