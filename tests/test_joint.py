@@ -65,8 +65,13 @@ def test_joint_cli(records, tmp_path, capsys):
     page = (tmp_path / "run" / "joint.html").read_text()
     assert "The joint posterior" in page and "Each record and the joint posterior" in page
     (tmp_path / "run" / "joint.html").unlink()
-    code, out, _ = run_cli(["report", str(tmp_path / "run")], capsys)
+    code, out, _ = run_cli(["report", str(tmp_path / "run"), "--pdf-backend", "matplotlib"],
+                           capsys)
     assert code == 0 and "joint.html" in out and (tmp_path / "run" / "joint.html").is_file()
+    assert (tmp_path / "run" / "joint.pdf").read_bytes()[:5] == b"%PDF-"
+    (tmp_path / "run" / "joint.pdf").unlink()
+    code, out, _ = run_cli(["report", str(tmp_path / "run"), "--no-pdf"], capsys)
+    assert code == 0 and not (tmp_path / "run" / "joint.pdf").exists()
     code, out, _ = run_cli(["identify", *paths, "--params", "k_By", "--steps", "100",
                             "--no-progress", "--out", str(tmp_path / "sampled")], capsys)
     assert code == 0 and "R-hat" in out and "posterior.nc" in out

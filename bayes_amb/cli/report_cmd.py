@@ -64,10 +64,13 @@ def run(args: argparse.Namespace) -> int:
 
     from bayes_amb.report.joint import is_joint_run, write_joint_report
     if is_joint_run(args.run_dir):            # identify REC1 REC2 ... --out RUN_DIR
-        path = write_joint_report(args.run_dir, args.out)
-        emit({"html": str(path), "pdf": None}, f"wrote {path} (a joint identification of "
-             "several recordings: one HTML page; report each record's own run for the "
-             "full report)", args.json)
+        path = write_joint_report(args.run_dir, args.out,
+                                  None if args.no_pdf else args.pdf_backend)
+        pdf = None if args.no_pdf else path.with_suffix(".pdf")
+        emit({"html": str(path), "pdf": None if pdf is None else str(pdf)},
+             f"wrote {path}" + ("" if pdf is None else f" and {pdf}") + " (a joint "
+             "identification of several recordings: one page; report each record's own "
+             "run for the full report)", args.json)
         return 0
     data = collect_run(args.run_dir, recording=args.recording, studies=args.study)
     check_rig_option(args, data.recording)

@@ -2,6 +2,7 @@
 
     from bayes_amb.report.joint import write_joint_report
     write_joint_report("runs/joint")       # after identify REC1 REC2 ... --out runs/joint
+    write_joint_report("runs/joint", pdf_backend="auto")    # and runs/joint/joint.pdf
 
 It reads what ``identify REC1 REC2 ... --out DIR`` wrote (DIR/summary.json, as
 bayes_amb.results.Identification) and shows, without recomputing anything estimated:
@@ -105,9 +106,11 @@ def is_joint_run(run_dir: str | Path) -> bool:
     return path.is_file() and bool(read_result(path).get("recordings"))
 
 
-def write_joint_report(run_dir: str | Path, out_dir: str | Path | None = None) -> Path:
+def write_joint_report(run_dir: str | Path, out_dir: str | Path | None = None,
+                       pdf_backend: str | None = None) -> Path:
     """Write OUT/joint.html (OUT defaults to the run folder) for a run folder of
-    ``identify REC1 REC2 ... --out DIR``; returns its path."""
+    ``identify REC1 REC2 ... --out DIR``, and with ``pdf_backend`` (render.write_pdf)
+    OUT/joint.pdf too; returns the HTML's path."""
     res = Identification.load(run_dir)
     return write_page(joint_sections(res), f"Joint identification of {len(res.records or [])} "
-                      "records", run_dir, out_dir, "joint.html")
+                      "records", run_dir, out_dir, "joint.html", pdf_backend)

@@ -77,9 +77,11 @@ def render_html(sections: list[Section], meta: dict[str, Any], pdf: bool = False
 
 
 def write_page(sections: list[Section], title: str, run_dir: str | Path,
-               out_dir: str | Path | None, name: str) -> Path:
+               out_dir: str | Path | None, name: str, pdf_backend: str | None = None
+               ) -> Path:
     """Write one HTML page of ``sections`` to OUT/name (OUT defaults to the run folder),
-    titled ``title`` with the run folder and the time it was made; returns its path."""
+    titled ``title`` with the run folder and the time it was made; returns its path. With
+    ``pdf_backend`` (see :func:`write_pdf`) the same page as a PDF beside it (NAME.pdf)."""
     now = datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC")
     meta = {"title": title, "subtitle": f"Run folder {Path(run_dir).name}; made {now} by "
                                         f"bayes-amb {__version__}", "notes": []}
@@ -87,6 +89,8 @@ def write_page(sections: list[Section], title: str, run_dir: str | Path,
     out.mkdir(parents=True, exist_ok=True)
     path = out / name
     write_text_atomic(path, render_html(sections, meta))
+    if pdf_backend is not None:
+        write_pdf(sections, meta, path.with_suffix(".pdf"), pdf_backend)
     return path
 
 
