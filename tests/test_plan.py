@@ -96,6 +96,7 @@ def test_plan_page(tmp_path, capsys):
     assert code == 0 and "plan.html" in out
     page = (tmp_path / "plan.html").read_text()
     assert page.count("data:image/png;base64,") == 2 and "k_By" in page
+    assert "duration (s)" in page and "noise_rms (m)" in page and "None" not in page
     assert json.loads((tmp_path / "plan.json").read_text())["plan"]["parameters"]["c_By"]
 
 
@@ -156,6 +157,7 @@ def test_the_colour_measured_on_a_record_gives_the_spread_its_spectrum_gives(rig
         assert p_meas.parameters[n]["sd_of_estimates"] == pytest.approx(spread_true, rel=0.35)
         assert abs(np.log(p_white.parameters[n]["sd_of_estimates"] / spread_true)) > 0.35
     assert any("whiteness test will reject" in t for t in p_meas.notes)
+    assert any("measured on one record" in t for t in p_meas.notes)
     for n in BEARING_COEFFICIENTS:        # identify reports the sandwich: sd ~ spread
         assert p_meas.parameters[n]["sd"] == pytest.approx(
             p_meas.parameters[n]["sd_of_estimates"], rel=0.02)   # mean vs RMS over records

@@ -14,11 +14,34 @@ from bayes_amb.plots.planning import sd_against
 from bayes_amb.report.figures import render_figure
 
 
-def _table(head: list[str], rows: list[list[str]]) -> str:
+def _table(head: list[str], rows: list[list[str]], css: str = "") -> str:
     h = "".join(f"<th>{html.escape(c)}</th>" for c in head)
     b = "".join("<tr>" + "".join(f"<td>{html.escape(str(c))}</td>" for c in r) + "</tr>"
                 for r in rows)
-    return f"<table><thead><tr>{h}</tr></thead><tbody>{b}</tbody></table>"
+    cls = f" class='{css}'" if css else ""
+    return f"<table{cls}><thead><tr>{h}</tr></thead><tbody>{b}</tbody></table>"
+
+
+UNITS = {"amplitude": "A", "duration": "s", "dt": "s", "band_hz": "Hz", "noise_rms": "m",
+         "r1_rms": "m", "r2_rms": "A", "r1_band_hz": "Hz", "r2_band_hz": "Hz"}
+"""The units of the design's and the noise's fields, as the page shows them."""
+
+
+def _label(key: str) -> str:
+    unit = UNITS.get(key)
+    return f"{key} ({unit})" if unit else key
+
+
+def _value(key: str, v: Any) -> str:
+    """A design or noise field as an engineer reads it: 3 significant digits, channel
+    names, '-' for a field that is not set ('all' channels)."""
+    if v is None:
+        return "all" if key == "channels" else "-"
+    if isinstance(v, (list, tuple)):
+        return ", ".join(_value(key, x) for x in v)
+    if isinstance(v, float):
+        return f"{v:.3g}"
+    return str(v)
 
 
 def write_plan_page(out: str | Path, plan: dict[str, Any],
@@ -30,8 +53,8 @@ def write_plan_page(out: str | Path, plan: dict[str, Any],
     write_text_atomic(d / "plan.json", json.dumps(data, indent=1, default=str) + "\n")
     targets = optimised["targets"] if optimised else None
     des, noise = plan["design"], plan["noise"]
-    design_rows = [[k, "all" if v is None and k == "channels" else v] for k, v in des.items()]
-    noise_rows = [[k, v] for k, v in noise.items() if k != "colour"]
+    design_rows = [[_label(k), _value(k, v)] for k, v in des.items()]
+    noise_rows = [[_label(k), _value(k, v)] for k, v in noise.items() if k != "colour"]
     if "colour" in noise:                   # measured on an earlier record (colour.py)
         c = noise["colour"]
         noise_rows.append(["colour", f"measured on {c['from']} ({c['n_bands']} bands, "
@@ -55,7 +78,7 @@ def write_plan_page(out: str | Path, plan: dict[str, Any],
              "<h2>Noise</h2>", _table(["source", "value"], noise_rows),
              "<h2>Prediction</h2>",
              _table(["parameter", "sd (theta)", "sd (physical)", "spread of estimates",
-                     "prior sd", "informed"], par_rows)]
+                     "prior sd", "informed"], par_rows, "nowrap")]
     parts += [f"<p class='note'>{html.escape(n)}</p>" for n in plan.get("notes", [])]
     for f in figs:
         parts.append(f"<figure><img src='{f.png_uri}' alt='{html.escape(f.title)}'>"
@@ -77,7 +100,8 @@ def write_plan_page(out: str | Path, plan: dict[str, Any],
              for c in optimised["candidates"]]))
     style = ("body{font-family:sans-serif;max-width:60em;margin:2em auto;color:#222}"
              "table{border-collapse:collapse;margin:0.5em 0}td,th{border:1px solid #ccc;"
-             "padding:2px 8px;text-align:left}img{max-width:100%}.note{color:#a33}")
+             "padding:2px 8px;text-align:left}img{max-width:100%}.note{color:#a33}"
+             ".nowrap td{white-space:nowrap}")
     page = (f"<!doctype html><html><head><meta charset='utf-8'><title>bayes-amb plan"
             f"</title><style>{style}</style></head><body>{''.join(parts)}</body></html>")
     path = d / "plan.html"

@@ -278,6 +278,12 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
                      f"whiteness test will reject it and report the sandwich sds predicted "
                      f"here; the white model's would be {min(ratios):.2f}-{max(ratios):.2f} x "
                      "them (sd_white)")
+    if noise.colour is not None and ratios:
+        source = noise.colour.source or "the record given"
+        notes.append(f"the colour was measured on one record ({source}): identify's sd "
+                     "varies between records of one rig, with the white intensities it fits "
+                     "on each; on replicate foreign records its mean was 0.83-1.20 x such a "
+                     "prediction (studies/plan_replicates.py)")
     speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
     return Plan(design=design, noise=noise, speed_rpm=speed, parameters=pars,
                 f_max_hz=info.f_max_hz, n_bins=info.n_bins, notes=notes,
