@@ -29,7 +29,8 @@ from bayes_amb.planning import Design, Noise, Plan, plan
 from bayes_amb.planning.plan import BEARING_COEFFICIENTS, noise_from
 
 
-def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True) -> Plan:
+def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True,
+              initial_state: bool = False) -> Plan:
     """The plan a user with this record makes for a record like it: its rig, controller,
     speed and dt, its excitation (a random binary of its amplitude at its port, on the
     channels it excites, its length), its noise as --noise-from takes it (--white: the
@@ -43,7 +44,8 @@ def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True)
                     duration=rec.t.size * rec.dt, dt=rec.dt, port=s["excitation_port"],
                     channels=None if len(live) == 4 else live)
     noise = (Noise(noise_rms=n["sigma_noise"]["value"], r1_rms=n["sigma_r1"]["value"],
-                   r2_rms=n["sigma_r2"]["value"]) if white else noise_from(rec))
+                   r2_rms=n["sigma_r2"]["value"]) if white
+             else noise_from(rec, initial_state))
     at = s["map"] if at_map else None     # the user's estimate from that record
     return plan(rec.rig, rec.controller, design, noise, speed_rpm=rec.speed_rpm, theta=at)
 

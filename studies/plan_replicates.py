@@ -6,7 +6,8 @@ recordings of one design. Here those recordings come from the benchmark's foreig
 colour of its noise, lines and disturbances, its excitation channels) is drawn as the
 benchmark draws case CASE of KIND at SEED, and REPS recordings of it are simulated, each
 with its own noise, excitation, line phases, r1/r2 and burn-in. Each is identified
-(``identify --map-only`` without the adequacy test, as studies/plan_check.py does) and
+(``identify --map-only`` without the adequacy test, as studies/plan_check.py does;
+``--initial-state``: with the record's start transient fitted, plan and identify) and
 compared with the plan a user makes from the first replicate (plan_foreign.user_plan: its
 rig, controller, excitation, its noise and colour as ``--noise-from`` measures them, at its
 MAP):
@@ -52,7 +53,7 @@ def case_dir(out: Path, kind: str, case: int) -> Path:
 
 
 def simulate_and_identify(out: Path, kind: str, case: int, seed: int, reps: int,
-                          shard: tuple[int, int]) -> None:
+                          shard: tuple[int, int], initial_state: bool = False) -> None:
     """Replicates of the case, each identified; a replicate already identified is kept."""
     where = case_dir(out, kind, case)
     where.mkdir(parents=True, exist_ok=True)
@@ -67,18 +68,20 @@ def simulate_and_identify(out: Path, kind: str, case: int, seed: int, reps: int,
         paths = write_case(spec, where, f"rep{r:03d}",
                            np.random.default_rng([seed, case, kind_number(kind), 1000 + r]))
         res = identify(load_recording(paths["csv"]), list(BEARING_COEFFICIENTS),
-                       options=IdentifyOptions(map_only=True, adequacy=False))
+                       options=IdentifyOptions(map_only=True, adequacy=False,
+                                               initial_state=initial_state))
         write_text_atomic(dest, json.dumps(res.to_dict(), default=float))
         print(f"{where.name} rep{r:03d} {time.perf_counter() - t0:.1f} s", flush=True)
 
 
-def score_case(where: Path) -> dict:
+def score_case(where: Path, initial_state: bool = False) -> dict:
     """The plan from the first replicate against all of them (module docstring)."""
     done = sorted(where.glob("rep*.identify.json"))
     if len(done) < 3:
         return {"replicates": len(done)}
     first = done[0].name.split(".")[0]
-    p = user_plan(load_recording(where / f"{first}.csv"), json.loads(done[0].read_text()))
+    p = user_plan(load_recording(where / f"{first}.csv"), json.loads(done[0].read_text()),
+                  initial_state=initial_state)
     truth = json.loads((where / f"{first}.truth.json").read_text())["theta"]
     sums = [json.loads(f.read_text()) for f in done]
     out = {"replicates": len(sums), "parameters": {}}
@@ -99,8 +102,9 @@ def score_case(where: Path) -> dict:
     return out
 
 
-def score(out: Path, kinds: list[str], cases: list[int]) -> dict:
-    table = {f"{kind}_{c:02d}": score_case(case_dir(out, kind, c))
+def score(out: Path, kinds: list[str], cases: list[int], initial_state: bool = False
+          ) -> dict:
+    table = {f"{kind}_{c:02d}": score_case(case_dir(out, kind, c), initial_state)
              for kind in kinds for c in cases}
     write_text_atomic(out / "summary.json", json.dumps(table, indent=1))
     lines = ["| case | coefficient | n | reported / predicted sd | empirical sd / predicted "
@@ -131,6 +135,8 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=50)
     ap.add_argument("--shard", default="0/1")
     ap.add_argument("--score-only", action="store_true")
+    ap.add_argument("--initial-state", action="store_true",
+                    help="identify and plan with the record's start transient fitted")
     a = ap.parse_args()
     kinds = [k for k in a.kinds.split(",") if k]
     cases = [int(c) for c in a.cases.split(",")]
@@ -138,9 +144,10 @@ def main() -> None:
         i, n = (int(x) for x in a.shard.split("/"))
         for kind in kinds:
             for c in cases:
-                simulate_and_identify(a.out, kind, c, a.seed, a.reps, (i, n))
+                simulate_and_identify(a.out, kind, c, a.seed, a.reps, (i, n),
+                                      a.initial_state)
     if a.score_only or a.shard.split("/")[0] == "0":
-        score(a.out, kinds, cases)
+        score(a.out, kinds, cases, a.initial_state)
 
 
 if __name__ == "__main__":

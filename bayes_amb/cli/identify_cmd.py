@@ -49,6 +49,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="run to 50 autocorrelation times (default: on)")
     p.add_argument("--map-only", action="store_true",
                    help="MAP + Laplace only, fast (default: MAP, then emcee)")
+    p.add_argument("--initial-state", action="store_true",
+                   help="fit the transient of the record's start (a record that starts "
+                   "mid-operation, as a rig's do; default off)")
     p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs",
                    help="MAP optimiser, one of lbfgs (L-BFGS-B, multi-start), nelder-mead "
                    "(the paper's fminsearch) (default lbfgs)")
@@ -144,7 +147,8 @@ def _run_joint(args: argparse.Namespace, priors) -> int:
     try:
         result = identify_joint(recs, args.params, priors, IdentifyOptions(
             walkers=args.walkers, steps=args.steps, map_only=args.map_only,
-            map_method=args.map_method, seed=args.seed, progress=update), per_record=per)
+            map_method=args.map_method, seed=args.seed, progress=update,
+            initial_state=args.initial_state), per_record=per)
     finally:
         if bar is not None:
             bar.close()
@@ -170,7 +174,8 @@ def run(args: argparse.Namespace) -> int:
     try:
         result = identify(rec, args.params, priors, IdentifyOptions(
             walkers=args.walkers, steps=args.steps, map_only=args.map_only,
-            map_method=args.map_method, seed=args.seed, progress=update))
+            map_method=args.map_method, seed=args.seed, progress=update,
+            initial_state=args.initial_state))
     finally:
         if bar is not None:
             bar.close()

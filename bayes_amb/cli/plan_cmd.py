@@ -33,6 +33,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="rig TOML file (default: the reference rig)")
     p.add_argument("--controller", default=None, metavar="FILE", help="controller JSON "
                    "(default: the reference controller designed for the rig and --dt)")
+    p.add_argument("--initial-state", action="store_true",
+                   help="with --noise-from: fit that record's start transient, as identify "
+                   "--initial-state does (default off)")
     p.add_argument("--noise-from", default=None, metavar="REC.csv",
                    help="take the noise, rig, controller and speed from an earlier recording "
                    "(the noise intensities identify fits on it and the colour of its "
@@ -103,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
     estimate: dict[str, float] = {}
     if args.noise_from:
         rec = load_recording(args.noise_from)
-        noise, estimate = recorded(rec)
+        noise, estimate = recorded(rec, args.initial_state)
         rig, ctrl = rec.rig, rec.controller
         speed = rec.speed_rpm if speed is None else speed
         design = Design(**{**design.__dict__, "dt": rec.dt})

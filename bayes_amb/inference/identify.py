@@ -78,7 +78,9 @@ class IdentifyOptions:
     noise_model ("loop": the coloured loop noise model; "iid": white Gaussian eps, the naive
     model, kept to show that it is overconfident), moves ("laplace": differential evolution
 mixed with independence proposals from the Laplace approximation at the MAP, the default;
-"de": differential evolution alone, the sampler before issue 16, kept for comparison)."""
+"de": differential evolution alone, the sampler before issue 16, kept for comparison),
+initial_state (fit the transient of the record's start, WhittleLikelihood.set_initial_state:
+for a record that starts mid-operation, as a rig's records do; off by default for now)."""
 
     walkers: int | None = None
     steps: int | None = None
@@ -90,6 +92,7 @@ mixed with independence proposals from the Laplace approximation at the MAP, the
     noise_model: str = "loop"
     moves: str = "laplace"
     adequacy: bool = True
+    initial_state: bool = False
 
 
 def _absolute(source: str) -> str:
@@ -219,6 +222,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     forward = ForwardModel(recording, names)
     eps = dual_youla_eps(forward.parts, np.asarray(recording.y), np.asarray(recording.u))
     like = WhittleLikelihood(forward, eps, noise_model=opt.noise_model)
+    if opt.initial_state:
+        like.set_initial_state(True)
     post = LogPosterior(like, prior_set)
     m = find_map(post, opt.map_method)
     if not np.isfinite(m.log_post):
@@ -257,7 +262,9 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         "map": {n: float(v) for n, v in zip(names, m.theta, strict=True)},
         "map_method": m.method,
         "map_wall_s": m.wall_s,
-        "noise": {"model": NOISE_MODEL,
+        "noise": {"model": NOISE_MODEL + ("; the record's start transient fitted (a free "
+                                          "response of the loop's modes, weights by least "
+                                          "squares)" if like.initial_state else ""),
                   "map": {s: {"value": float(10 ** v), "unit": u}
                           for s, v, u in zip(NOISE_SOURCES, m.log10_sigma, NOISE_UNITS,
                                              strict=True)}},

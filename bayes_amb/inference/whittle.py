@@ -164,6 +164,8 @@ class WhittleLikelihood:
         self.counts = np.diff(np.append(self.starts, k.size))
         self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (n * forward.dt)
         self.prefilter = np.ones(1)
+        self.initial_state = False      # set_initial_state: fit the record's start transient
+        self._transient_pinv: NDArray | None = None
         if noise_model == "loop":
             self.prefilter = data_prewhitening(self.eps, forward.dt)
         self._apply_prefilter()
@@ -243,6 +245,40 @@ class WhittleLikelihood:
         self._last_sums = None
         if getattr(self, "_row_sums", None) is not None:
             self._row_sums.clear()
+        if self.initial_state:
+            self._transient_basis()
+
+    def set_initial_state(self, on: bool = True) -> None:
+        """Fit the transient of the record's start (on: the default off keeps the
+        likelihood as it was). A real record starts mid-operation: the loop's states are
+        not at rest at its first sample, and eps carries their free response, which S(theta)
+        x from rest does not. Its DFT is T_k = w(z_k) C (z_k I - A)^-1 z_k s0 (w the
+        prewhitening FIR, s0 the start state in the modal coordinates of x -> eps): a fixed
+        rational shape per mode with unknown weights. The modes are those at the noise
+        reference theta (set_noise_reference; the MAP once identify has one), and the
+        weights are fitted by least squares at every theta (variable projection, so the
+        curvature is that of the profile likelihood)."""
+        self.initial_state = bool(on)
+        self._transient_pinv = None
+        if self.initial_state:
+            self._transient_basis()
+        self._last_sums = None
+        self._fused = None
+        if getattr(self, "_row_sums", None) is not None:
+            self._row_sums.clear()
+
+    def _transient_basis(self) -> None:
+        """The start transient's basis L (nf, 4, ns) at the noise reference and its
+        pseudo-inverse over the stacked bins and channels (set_initial_state)."""
+        mb, _ = self.forward.modal(np.atleast_2d(self.theta_ref), self.x_w)
+        lam, Cm = mb.lam[0], mb.Cm[0]                                 # (ns,), (4, ns)
+        wz = np.polyval(self.prefilter[::-1], 1.0 / self.z)          # FIR gain at z_k
+        g = (wz * self.z)[:, None] / (self.z[:, None] - lam[None, :])  # (nf, ns)
+        L = g[:, None, :] * Cm[None, :, :] / self.scale                 # (nf, 4, ns)
+        L = np.concatenate([L, 1j * L], axis=-1)      # real weights: a + i b per mode
+        self._transient_L = np.ascontiguousarray(L)
+        flat = L.reshape(-1, L.shape[-1])
+        self._transient_pinv = np.linalg.pinv(np.vstack([flat.real, flat.imag]), rcond=1e-10)
 
     def residual_dft(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """DFT of eps - S(theta) x (scaled, minus any line terms) for a batch, and the
@@ -291,8 +327,16 @@ class WhittleLikelihood:
 
     def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
         """Extra terms subtracted from the residual DFT: bases (nf, 4, nl) and coefficients
-        (nb, nl); none here (the discrepancy likelihood adds its spectral lines)."""
-        return None, None
+        (nb, nl); none here unless the start transient is fitted (set_initial_state; the
+        discrepancy likelihood adds its spectral lines)."""
+        if not self.initial_state or self._transient_pinv is None:
+            return None, None
+        mb, xi = self.modal_state(np.atleast_2d(theta))
+        R0 = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
+        flat = R0.reshape(R0.shape[0], -1)
+        coef = np.hstack([flat.real, flat.imag]) @ self._transient_pinv.T   # (nb, 2 ns)
+        coef[~mb.stable] = 0.0
+        return self._transient_L, coef
 
     def band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         """P_b = sum over the bins of each band of R_k R_k^H, (nb, n_bands, 4, 4), and the
@@ -337,6 +381,7 @@ class WhittleLikelihood:
         memory (the last batch again, remembered rows, repeated rows) or a member the
         compiled modal form rejects. Remembers the batch's band sums as band_sums does."""
         if (type(self) is not WhittleLikelihood or type(self.forward) is not ForwardModel
+                or self.initial_state
                 or not self.forward.fast or theta.shape[0] < walker_kernels.LANES_MIN_BATCH
                 or getattr(self, "_row_sums", None) is not None
                 or not self.engine.compiled_modal):

@@ -290,21 +290,24 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
                 theta={n: float(v) for n, v in zip(names, th, strict=True)})
 
 
-def noise_from(recording: Recording) -> Noise:
+def noise_from(recording: Recording, initial_state: bool = False) -> Noise:
     """The noise of an earlier recording: the white intensities identify fits on it (its
     MAP of the eight bearing coefficients and the three white sources; no sampling, no
-    adequacy test) and the colour of its residual there (colour.py)."""
-    return recorded(recording)[0]
+    adequacy test; ``initial_state``: with the record's start transient fitted, as
+    identify --initial-state fits it) and the colour of its residual there (colour.py)."""
+    return recorded(recording, initial_state)[0]
 
 
-def recorded(recording: Recording) -> tuple[Noise, dict[str, float]]:
+def recorded(recording: Recording, initial_state: bool = False
+             ) -> tuple[Noise, dict[str, float]]:
     """:func:`noise_from`, and identify's MAP of the eight bearing coefficients on the
     same fit: the estimate a plan from that record is made at (``plan --noise-from``;
     on the foreign records it predicts identify's sd to 0.94-1.07x, against 0.93-1.66x
     at the nominal)."""
     from bayes_amb.inference.identify import IdentifyOptions, identify
     res = identify(recording, BEARING_COEFFICIENTS,
-                   options=IdentifyOptions(map_only=True, adequacy=False))
+                   options=IdentifyOptions(map_only=True, adequacy=False,
+                                           initial_state=initial_state))
     m = res.noise.map
     colour = measure_colour(res.likelihood, res.map_result.theta, res.map_result.log10_sigma,
                             source=str(recording.source))
