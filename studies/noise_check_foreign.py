@@ -38,14 +38,15 @@ def _records(run: Path, kind: str, step: int) -> list[Path]:
 
 
 def identify_all(run: Path, kind: str, step: int, out: str, map_only: bool, shard: int,
-                 n_shards: int) -> None:
+                 n_shards: int, initial_state: bool = False) -> None:
     for k, csv in enumerate(_records(run, kind, step)):
         dest = run / out / f"{csv.stem}.json"
         if k % n_shards != shard or dest.exists():
             continue
         t0 = time.perf_counter()
         res = identify(load_recording(csv), list(COEFFICIENTS),
-                       options=IdentifyOptions(map_only=map_only))
+                       options=IdentifyOptions(map_only=map_only,
+                                               initial_state=initial_state))
         dest.parent.mkdir(parents=True, exist_ok=True)
         write_text_atomic(dest, result_json_text(plain(res.to_dict(), float)))
         print(csv.stem, f"{time.perf_counter() - t0:.1f} s", "converged" if res.converged
@@ -101,12 +102,14 @@ def main() -> int:
     ap.add_argument("--step", type=int, default=1)
     ap.add_argument("--out", default="identify_noise_check")
     ap.add_argument("--map-only", action="store_true")
+    ap.add_argument("--initial-state", action="store_true",
+                    help="identify with the record's start transient fitted")
     ap.add_argument("--shard", default="0/1")
     ap.add_argument("--score-only", action="store_true")
     a = ap.parse_args()
     if not a.score_only:
         i, n = (int(v) for v in a.shard.split("/"))
-        identify_all(a.run, a.kind, a.step, a.out, a.map_only, i, n)
+        identify_all(a.run, a.kind, a.step, a.out, a.map_only, i, n, a.initial_state)
     result = score(a.run, a.kind, a.step, a.out)
     print(json.dumps(result, indent=1))
     return 0

@@ -13,7 +13,8 @@ prediction is claimed nowhere else; how many of the others identify put on a pri
 is counted).
 
     PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force \
-        [--at-map] [--white] [--identify-dir identify] [--json OUT.json]
+        [--at-map] [--white] [--initial-state] [--identify-dir identify] [--json OUT.json] \
+        [--shard i/n]        # shards' JSONs scored together: --merge A.json B.json
 """
 
 from __future__ import annotations
@@ -51,15 +52,18 @@ def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True,
 
 
 def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False,
-          identify_dir: str = "identify") -> dict:
+          identify_dir: str = "identify", initial_state: bool = False,
+          shard: tuple[int, int] = (0, 1)) -> dict:
     rows = []
-    for ident in sorted((run / identify_dir).glob("*.json")):
+    for j, ident in enumerate(sorted((run / identify_dir).glob("*.json"))):
+        if j % shard[1] != shard[0]:
+            continue
         name = ident.stem
         if name.rsplit("_", 1)[0] not in kinds:
             continue
         s = json.loads(ident.read_text())
         rec = load_recording(run / "recordings" / f"{name}.csv")
-        p = user_plan(rec, s, white, at_map)
+        p = user_plan(rec, s, white, at_map, initial_state)
         truth = json.loads((run / "recordings" / f"{name}.truth.json").read_text())["theta"]
         par = s.get("parameters_model_only", s["parameters"])
         if any(par[k]["sd"] is None for k in BEARING_COEFFICIENTS):
@@ -72,6 +76,13 @@ def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False
             "z": (par[k]["mean"] - truth[k]) / p.parameters[k]["sd_of_estimates"],
             "z_sd": (par[k]["mean"] - truth[k]) / p.sd(k)}
             for k in BEARING_COEFFICIENTS}})
+    return aggregate(rows)
+
+
+def aggregate(rows: list[dict]) -> dict:
+    """Per coefficient, over the records where the plan calls it informed: identify's sd
+    over the predicted and the scaled errors (module docstring); ``rows`` as check makes
+    them (several shards' rows may be joined)."""
     out = {"n": len(rows), "rows": rows, "parameters": {}}
     for k in BEARING_COEFFICIENTS:
         # the plan's first-order prediction is for what it calls informed; a record whose
@@ -109,8 +120,21 @@ def main() -> None:
     ap.add_argument("--identify-dir", default="identify",
                     help="the folder of RUN holding identify's summaries")
     ap.add_argument("--json", type=Path, help="also write the rows and figures here")
+    ap.add_argument("--initial-state", action="store_true",
+                    help="plan with the record's start transient fitted (as identify "
+                    "--initial-state)")
+    ap.add_argument("--shard", default="0/1",
+                    help="i/n: every n-th record from the i-th (merge the JSONs with "
+                    "--merge)")
+    ap.add_argument("--merge", type=Path, nargs="*", default=None,
+                    help="score the rows of these --json files together instead")
     a = ap.parse_args()
-    r = check(a.run, a.kinds.split(","), a.white, a.at_map, a.identify_dir)
+    i, n = (int(x) for x in a.shard.split("/"))
+    if a.merge:
+        r = aggregate([row for f in a.merge for row in json.loads(f.read_text())["rows"]])
+    else:
+        r = check(a.run, a.kinds.split(","), a.white, a.at_map, a.identify_dir,
+                  a.initial_state, (i, n))
     if a.json:
         a.json.write_text(json.dumps(r, indent=1))
     print(f"{r['n']} records")
