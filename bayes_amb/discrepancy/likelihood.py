@@ -160,8 +160,10 @@ class RobustWhittle(WhittleLikelihood):
                                           axis=0)[self.k])                   # (nf, 4, 2)
         self._last_sums = None                      # the band sums depend on the lines
 
-    def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
-        """The spectral-line bases (nf, 4, 2 per line candidate) and their coefficients."""
+    def _line_terms(self, theta: NDArray, modal: tuple[ModalBatch, NDArray]
+                    ) -> tuple[NDArray | None, NDArray | None]:
+        """The spectral-line bases (nf, 4, 2 per line candidate) and their coefficients
+        (theta's line parameters; ``modal`` is not needed)."""
         fwd: ExtendedForwardModel = self.forward  # type: ignore[assignment]
         if not self.lines:
             return None, None

@@ -284,13 +284,11 @@ class WhittleLikelihood:
         """DFT of eps - S(theta) x (scaled, minus any line terms) for a batch, and the
         stability mask (the compiled kernel, or the numpy path with the engine "numpy")."""
         mb, xi = self.modal_state(theta)
+        lines, coef = self._line_terms(theta, (mb, xi))
         if self.engine.compiled:
-            lines, coef = self._line_terms(theta)
             return kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
                                         self.scale, lines, coef), mb.stable
-        Y = dft_response(mb, self.X, self.z, xi) / self.scale
-        R = self.E[None] - Y
-        lines, coef = self._line_terms(theta)
+        R = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
         if lines is not None:
             R = R - np.einsum("kcl,bl->bkc", lines, coef)
         return R, mb.stable
@@ -325,14 +323,20 @@ class WhittleLikelihood:
         mb, xi = self.forward.modal(theta, self.x_w)
         return mb, xi
 
-    def _line_terms(self, theta: NDArray) -> tuple[NDArray | None, NDArray | None]:
+    def _line_terms(self, theta: NDArray, modal: tuple[ModalBatch, NDArray]
+                    ) -> tuple[NDArray | None, NDArray | None]:
         """Extra terms subtracted from the residual DFT: bases (nf, 4, nl) and coefficients
         (nb, nl); none here unless the start transient is fitted (set_initial_state; the
-        discrepancy likelihood adds its spectral lines)."""
+        discrepancy likelihood adds its spectral lines). ``modal``: modal_state(theta),
+        which the caller has formed already."""
         if not self.initial_state or self._transient_pinv is None:
             return None, None
-        mb, xi = self.modal_state(np.atleast_2d(theta))
-        R0 = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
+        mb, xi = modal
+        if self.engine.compiled:
+            R0 = kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
+                                      self.scale)
+        else:
+            R0 = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
         flat = R0.reshape(R0.shape[0], -1)
         coef = np.hstack([flat.real, flat.imag]) @ self._transient_pinv.T   # (nb, 2 ns)
         coef[~mb.stable] = 0.0
@@ -437,7 +441,7 @@ class WhittleLikelihood:
             R, stable = self.residual_dft(theta)
             return self._band_sums(R), stable
         mb, xi = self.modal_state(theta)
-        lines, coef = self._line_terms(theta)
+        lines, coef = self._line_terms(theta, (mb, xi))
         kernel = kernels.residual_band_sums
         if self.engine.compiled_modal and theta.shape[0] >= walker_kernels.LANES_MIN_BATCH:
             kernel = walker_kernels.residual_band_sums_lanes
