@@ -160,7 +160,7 @@ class RobustWhittle(WhittleLikelihood):
                                           axis=0)[self.k])                   # (nf, 4, 2)
         self._last_sums = None                      # the band sums depend on the lines
 
-    def _line_terms(self, theta: NDArray, modal: tuple[ModalBatch, NDArray]
+    def _line_terms(self, theta: NDArray, modal: tuple[ModalBatch, NDArray] | None = None
                     ) -> tuple[NDArray | None, NDArray | None]:
         """The spectral-line bases (nf, 4, 2 per line candidate) and their coefficients
         (theta's line parameters; ``modal`` is not needed)."""

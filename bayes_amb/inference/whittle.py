@@ -323,15 +323,15 @@ class WhittleLikelihood:
         mb, xi = self.forward.modal(theta, self.x_w)
         return mb, xi
 
-    def _line_terms(self, theta: NDArray, modal: tuple[ModalBatch, NDArray]
+    def _line_terms(self, theta: NDArray, modal: tuple[ModalBatch, NDArray] | None = None
                     ) -> tuple[NDArray | None, NDArray | None]:
         """Extra terms subtracted from the residual DFT: bases (nf, 4, nl) and coefficients
         (nb, nl); none here unless the start transient is fitted (set_initial_state; the
         discrepancy likelihood adds its spectral lines). ``modal``: modal_state(theta),
-        which the caller has formed already."""
+        which the caller has formed already (None: formed here)."""
         if not self.initial_state or self._transient_pinv is None:
             return None, None
-        mb, xi = modal
+        mb, xi = modal if modal is not None else self.modal_state(np.atleast_2d(theta))
         if self.engine.compiled:
             R0 = kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
                                       self.scale)

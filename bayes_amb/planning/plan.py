@@ -283,7 +283,8 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
         notes.append(f"the colour was measured on one record ({source}): identify's sd "
                      "varies between records of one rig, with the white intensities it fits "
                      "on each; on replicate foreign records its mean was 0.83-1.20 x such a "
-                     "prediction (studies/plan_replicates.py)")
+                     "prediction, 0.93-1.11 with their start transient fitted "
+                     "(--initial-state; studies/plan_replicates.py)")
     speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
     return Plan(design=design, noise=noise, speed_rpm=speed, parameters=pars,
                 f_max_hz=info.f_max_hz, n_bins=info.n_bins, notes=notes,
