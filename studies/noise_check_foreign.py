@@ -38,7 +38,7 @@ def _records(run: Path, kind: str, step: int) -> list[Path]:
 
 
 def identify_all(run: Path, kind: str, step: int, out: str, map_only: bool, shard: int,
-                 n_shards: int, initial_state: bool = False) -> None:
+                 n_shards: int, initial_state: bool | None = None) -> None:
     for k, csv in enumerate(_records(run, kind, step)):
         dest = run / out / f"{csv.stem}.json"
         if k % n_shards != shard or dest.exists():
@@ -102,8 +102,9 @@ def main() -> int:
     ap.add_argument("--step", type=int, default=1)
     ap.add_argument("--out", default="identify_noise_check")
     ap.add_argument("--map-only", action="store_true")
-    ap.add_argument("--initial-state", action="store_true",
-                    help="identify with the record's start transient fitted")
+    ap.add_argument("--initial-state", action=argparse.BooleanOptionalAction,
+                    default=None,
+                    help="fit the start transient or not (default: as identify decides)")
     ap.add_argument("--shard", default="0/1")
     ap.add_argument("--score-only", action="store_true")
     a = ap.parse_args()

@@ -13,7 +13,7 @@ prediction is claimed nowhere else; how many of the others identify put on a pri
 is counted).
 
     PYTHONPATH=. python studies/plan_foreign.py runs/f27 --kinds control,control_force \
-        [--at-map] [--white] [--initial-state] [--identify-dir identify] [--json OUT.json] \
+        [--at-map] [--white] [--[no-]initial-state] [--identify-dir identify] [--json OUT.json] \
         [--shard i/n]        # shards' JSONs scored together: --merge A.json B.json
 """
 
@@ -31,7 +31,7 @@ from bayes_amb.planning.plan import BEARING_COEFFICIENTS, noise_from
 
 
 def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True,
-              initial_state: bool = False) -> Plan:
+              initial_state: bool | None = None) -> Plan:
     """The plan a user with this record makes for a record like it: its rig, controller,
     speed and dt, its excitation (a random binary of its amplitude at its port, on the
     channels it excites, its length), its noise as --noise-from takes it (--white: the
@@ -52,7 +52,7 @@ def user_plan(rec: Recording, s: dict, white: bool = False, at_map: bool = True,
 
 
 def check(run: Path, kinds: list[str], white: bool = False, at_map: bool = False,
-          identify_dir: str = "identify", initial_state: bool = False,
+          identify_dir: str = "identify", initial_state: bool | None = None,
           shard: tuple[int, int] = (0, 1)) -> dict:
     rows = []
     for j, ident in enumerate(sorted((run / identify_dir).glob("*.json"))):
@@ -120,9 +120,9 @@ def main() -> None:
     ap.add_argument("--identify-dir", default="identify",
                     help="the folder of RUN holding identify's summaries")
     ap.add_argument("--json", type=Path, help="also write the rows and figures here")
-    ap.add_argument("--initial-state", action="store_true",
-                    help="plan with the record's start transient fitted (as identify "
-                    "--initial-state)")
+    ap.add_argument("--initial-state", action=argparse.BooleanOptionalAction,
+                    default=None,
+                    help="fit the start transient or not (default: as identify decides)")
     ap.add_argument("--shard", default="0/1",
                     help="i/n: every n-th record from the i-th (merge the JSONs with "
                     "--merge)")

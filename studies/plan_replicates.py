@@ -7,7 +7,7 @@ colour of its noise, lines and disturbances, its excitation channels) is drawn a
 benchmark draws case CASE of KIND at SEED, and REPS recordings of it are simulated, each
 with its own noise, excitation, line phases, r1/r2 and burn-in. Each is identified
 (``identify --map-only`` without the adequacy test, as studies/plan_check.py does;
-``--initial-state``: with the record's start transient fitted, plan and identify) and
+``--[no-]initial-state``: the record's start transient fitted or not, plan and identify) and
 compared with the plan a user makes from the first replicate (plan_foreign.user_plan: its
 rig, controller, excitation, its noise and colour as ``--noise-from`` measures them, at its
 MAP):
@@ -53,7 +53,7 @@ def case_dir(out: Path, kind: str, case: int) -> Path:
 
 
 def simulate_and_identify(out: Path, kind: str, case: int, seed: int, reps: int,
-                          shard: tuple[int, int], initial_state: bool = False) -> None:
+                          shard: tuple[int, int], initial_state: bool | None = None) -> None:
     """Replicates of the case, each identified; a replicate already identified is kept."""
     where = case_dir(out, kind, case)
     where.mkdir(parents=True, exist_ok=True)
@@ -74,7 +74,7 @@ def simulate_and_identify(out: Path, kind: str, case: int, seed: int, reps: int,
         print(f"{where.name} rep{r:03d} {time.perf_counter() - t0:.1f} s", flush=True)
 
 
-def score_case(where: Path, initial_state: bool = False) -> dict:
+def score_case(where: Path, initial_state: bool | None = None) -> dict:
     """The plan from the first replicate against all of them (module docstring)."""
     done = sorted(where.glob("rep*.identify.json"))
     if len(done) < 3:
@@ -102,7 +102,7 @@ def score_case(where: Path, initial_state: bool = False) -> dict:
     return out
 
 
-def score(out: Path, kinds: list[str], cases: list[int], initial_state: bool = False
+def score(out: Path, kinds: list[str], cases: list[int], initial_state: bool | None = None
           ) -> dict:
     table = {f"{kind}_{c:02d}": score_case(case_dir(out, kind, c), initial_state)
              for kind in kinds for c in cases}
@@ -135,8 +135,9 @@ def main() -> None:
     ap.add_argument("--reps", type=int, default=50)
     ap.add_argument("--shard", default="0/1")
     ap.add_argument("--score-only", action="store_true")
-    ap.add_argument("--initial-state", action="store_true",
-                    help="identify and plan with the record's start transient fitted")
+    ap.add_argument("--initial-state", action=argparse.BooleanOptionalAction,
+                    default=None,
+                    help="fit the start transient or not (default: as identify decides)")
     a = ap.parse_args()
     kinds = [k for k in a.kinds.split(",") if k]
     cases = [int(c) for c in a.cases.split(",")]

@@ -311,6 +311,22 @@ def test_cli_identify_json(cli_recording, tmp_path, capsys):
     assert loaded.plot("trace") is not None and "k_By" in loaded.summary()
 
 
+@pytest.mark.parametrize(("flag", "fitted", "reason"), [
+    ([], False, "data check: the record starts at rest"),
+    (["--initial-state"], True, "--initial-state"),
+    (["--no-initial-state"], False, "--no-initial-state"),
+])
+def test_cli_identify_start_transient_choice(cli_recording, tmp_path, capsys, flag, fitted,
+                                             reason):
+    code, out, err = run_cli(["identify", str(cli_recording), "--params", "k_By", "--out",
+                              str(tmp_path / "r"), "--map-only", "--json", *flag], capsys)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["start_transient"]["fitted"] is fitted
+    assert s["start_transient"]["reason"] == reason
+    assert ("start transient fitted" in s["noise"]["model"]) is fitted
+
+
 @pytest.mark.parametrize(("args", "needle"), [
     (["--params", "k_Zz"], "k_Zz"),
     (["--params", "k_By", "--prior", "k_By=normal(0.3)"], "prior"),

@@ -64,3 +64,18 @@ def test_a_record_from_rest_is_unchanged(records):
         # the transient's weights take a few dozen of some 10^4 data; measured 0.5 sd
         assert abs(on["parameters"][k]["mean"] - off["parameters"][k]["mean"]) < \
             off["parameters"][k]["sd"]
+
+
+def test_by_default_the_data_check_decides(records):
+    """initial_state None (the default): the transient is fitted on the record that starts
+    mid-operation, not on the one from rest, and the summary says which and why."""
+    rest, mid = records
+    got = {name: _fit(rec, None) for name, rec in (("rest", rest), ("mid", mid))}
+    assert got["rest"]["start_transient"]["fitted"] is False
+    assert "starts at rest" in got["rest"]["start_transient"]["reason"]
+    assert "start transient fitted" not in got["rest"]["noise"]["model"]
+    start = got["mid"]["start_transient"]
+    assert start["fitted"] is True and "mid-operation" in start["reason"]
+    assert start["start_difference"] > 0.01 > got["rest"]["start_transient"]["start_difference"]
+    assert got["mid"]["parameters"] == _fit(mid, True)["parameters"]
+    assert _fit(mid, False)["start_transient"]["reason"] == "--no-initial-state"

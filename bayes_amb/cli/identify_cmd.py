@@ -49,9 +49,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="run to 50 autocorrelation times (default: on)")
     p.add_argument("--map-only", action="store_true",
                    help="MAP + Laplace only, fast (default: MAP, then emcee)")
-    p.add_argument("--initial-state", action="store_true",
-                   help="fit the transient of the record's start (a record that starts "
-                   "mid-operation, as a rig's do; default off)")
+    p.add_argument("--initial-state", action=argparse.BooleanOptionalAction, default=None,
+                   help="fit the transient of the record's start, or not (default: fitted "
+                   "when the data check finds that the record starts mid-operation, as a "
+                   "rig's records do)")
     p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs",
                    help="MAP optimiser, one of lbfgs (L-BFGS-B, multi-start), nelder-mead "
                    "(the paper's fminsearch) (default lbfgs)")

@@ -33,9 +33,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="rig TOML file (default: the reference rig)")
     p.add_argument("--controller", default=None, metavar="FILE", help="controller JSON "
                    "(default: the reference controller designed for the rig and --dt)")
-    p.add_argument("--initial-state", action="store_true",
-                   help="with --noise-from: fit that record's start transient, as identify "
-                   "--initial-state does (default off)")
+    p.add_argument("--initial-state", action=argparse.BooleanOptionalAction, default=None,
+                   help="with --noise-from: fit that record's start transient, or not, as "
+                   "identify does (default: as identify decides, fitted when the record "
+                   "starts mid-operation)")
     p.add_argument("--noise-from", default=None, metavar="REC.csv",
                    help="take the noise, rig, controller and speed from an earlier recording "
                    "(the noise intensities identify fits on it and the colour of its "

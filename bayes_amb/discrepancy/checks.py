@@ -164,6 +164,47 @@ def _coherent_share(d: NDArray, x: NDArray, u: NDArray, min_bins: int = 32
     return expl / max(float(np.sum(np.abs(U) ** 2)), 1e-300), p_adj
 
 
+@dataclass(frozen=True)
+class StartState:
+    """How the record starts, from the controller's side: u, the difference d = u - K(y +
+    r1, eta) - r2 (K run from rest), the samples n_settle the slowest of the controller's and
+    the loop's poles needs to die out (to 1e-6), the tail after it, d's RMS there and in
+    the first samples (rel_tail, rel_head, relative to u's RMS in the tail) and at_rest:
+    the head's difference is no larger than ten times the tail's (or 1e-3 of u)."""
+
+    u: NDArray
+    d: NDArray
+    n_settle: int
+    tail: slice
+    rel_tail: float
+    rel_head: float
+
+    @property
+    def at_rest(self) -> bool:
+        return self.rel_head <= max(10 * CONTROLLER_TOL, 10 * self.rel_tail)
+
+
+def start_state(rec: Recording, poles: NDArray) -> StartState:
+    """Does the record start at rest? (StartState; ``poles``: the loop's discrete poles,
+    adequacy.loop_poles.) A controller started from rest on the recorded signals
+    reproduces the recorded u only after the controller's initial state has died out, so a
+    record that starts mid-operation shows a start-up difference. The diagnosis then uses
+    the first samples as pre-history (run_checks), and identify fits the start transient
+    (IdentifyOptions.initial_state)."""
+    u = np.asarray(rec.u, dtype=float)
+    d = u - recompute_u(rec)
+    n = u.shape[0]
+    ctrl_poles = np.linalg.eigvals(np.asarray(rec.controller.A, dtype=float)) \
+        if rec.controller.A.size else np.zeros(0)
+    n_settle = settle_samples(np.concatenate([ctrl_poles, poles]), n, 1e-6)
+    tail = slice(min(n_settle, n // 2), n)
+    scale = float(np.sqrt(np.mean((u[tail] - u[tail].mean(axis=0)) ** 2))) or 1.0
+    head = slice(0, max(1, min(20, n // 50)))
+    return StartState(u=u, d=d, n_settle=n_settle, tail=tail,
+                      rel_tail=float(np.sqrt(np.mean(d[tail] ** 2)) / scale),
+                      rel_head=float(np.sqrt(np.mean(d[head] ** 2)) / scale))
+
+
 def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]:
     """Controller consistency and start at rest; returns both checks and the samples the
     controller's initial state needs to die out.
@@ -175,19 +216,10 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
     regression of d on the excitation (after the start-up) is significant and explains
     more than 1e-6 of the power of u.
     """
-    u = np.asarray(rec.u, dtype=float)
-    d = u - recompute_u(rec)
-    n = u.shape[0]
-    ctrl_poles = np.linalg.eigvals(np.asarray(rec.controller.A, dtype=float)) \
-        if rec.controller.A.size else np.zeros(0)
-    n_settle = settle_samples(np.concatenate([ctrl_poles, poles]), n, 1e-6)
-    tail = slice(min(n_settle, n // 2), n)
-    scale = float(np.sqrt(np.mean((u[tail] - u[tail].mean(axis=0)) ** 2))) or 1.0
-    rel_tail = float(np.sqrt(np.mean(d[tail] ** 2)) / scale)
+    st = start_state(rec, poles)
+    u, d, tail, rel_tail, rel_head = st.u, st.d, st.tail, st.rel_tail, st.rel_head
     x = np.concatenate(list(rec.excitation.values()), axis=1)[tail]
     share, p_adj = _coherent_share(d[tail], x, u[tail])
-    head = slice(0, max(1, min(20, n // 50)))
-    rel_head = float(np.sqrt(np.mean(d[head] ** 2)) / scale)
     ok = not (p_adj < 1e-3 and share > CONTROLLER_SHARE)
     if ok:
         line = (f"controller: the recorded u is what the documented controller makes from the "
@@ -199,7 +231,7 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
                 f"{share:.1e}, p {p_adj:.1e}); the controller that ran is not the one in the "
                 "recording's sidecar, so the model cannot be compared with the data and no "
                 "physics is named")
-    at_rest = rel_head <= max(10 * CONTROLLER_TOL, 10 * rel_tail)
+    at_rest = st.at_rest
     start_line = ("start: the record starts at rest (the controller's state is zero at the "
                   "first sample)" if at_rest else
                   f"start: the record starts mid-operation (the controller's initial state "
@@ -209,7 +241,7 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
                                            "excitation_share": share, "p_adjusted": p_adj}),
             Check("start", True, start_line, {"at_rest": bool(at_rest),
                                               "start_difference": rel_head}),
-            n_settle)
+            st.n_settle)
 
 
 def check_offsets(rec: Recording) -> tuple[Check, NDArray, NDArray, bool]:

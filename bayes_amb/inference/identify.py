@@ -21,7 +21,8 @@ import numpy as np
 from scipy import stats
 
 from bayes_amb import __version__
-from bayes_amb.discrepancy.adequacy import assess_fit
+from bayes_amb.discrepancy.adequacy import assess_fit, loop_poles
+from bayes_amb.discrepancy.checks import start_state
 from bayes_amb.discrepancy.fitstats import draws, theta_summary
 from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.errors import BayesAmbError
@@ -80,7 +81,8 @@ class IdentifyOptions:
 mixed with independence proposals from the Laplace approximation at the MAP, the default;
 "de": differential evolution alone, the sampler before issue 16, kept for comparison),
 initial_state (fit the transient of the record's start, WhittleLikelihood.set_initial_state:
-for a record that starts mid-operation, as a rig's records do; off by default for now)."""
+True or False; None, the default, fits it when the data check finds that the record starts
+mid-operation, as a rig's records do: start_transient)."""
 
     walkers: int | None = None
     steps: int | None = None
@@ -92,7 +94,7 @@ for a record that starts mid-operation, as a rig's records do; off by default fo
     noise_model: str = "loop"
     moves: str = "laplace"
     adequacy: bool = True
-    initial_state: bool = False
+    initial_state: bool | None = None
 
 
 def _absolute(source: str) -> str:
@@ -205,6 +207,25 @@ def _bound_notes(names: tuple[str, ...], bound: np.ndarray) -> dict[str, Any]:
                       "(held at the nominal value)."]}
 
 
+def start_transient(recording: Recording, forward: ForwardModel,
+                    choice: bool | None = None) -> dict[str, Any]:
+    """Whether identify fits the record's start transient (IdentifyOptions.initial_state),
+    and why: ``choice`` True or False as given; None (the default) by the data check of
+    the diagnosis (discrepancy.checks.start_state): a record that starts mid-operation
+    carries the free response of the loop's states at its first sample, which taken as
+    noise leaves the intervals up to twice too wide (README, "A record that starts
+    mid-operation"). Returns {"fitted", "reason"} and, when checked, "start_difference"
+    (the controller's start-up difference, a share of u's RMS)."""
+    if choice is not None:
+        return {"fitted": bool(choice), "reason": "--initial-state" if choice
+                else "--no-initial-state"}
+    st = start_state(recording, loop_poles(forward))
+    where = (f"the record starts mid-operation (start-up difference {100 * st.rel_head:.2g} "
+             "% of u)" if not st.at_rest else "the record starts at rest")
+    return {"fitted": not st.at_rest, "reason": f"data check: {where}",
+            "start_difference": st.rel_head}
+
+
 @limited_threads
 def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
              priors: dict[str, Prior] | None = None,
@@ -222,7 +243,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     forward = ForwardModel(recording, names)
     eps = dual_youla_eps(forward.parts, np.asarray(recording.y), np.asarray(recording.u))
     like = WhittleLikelihood(forward, eps, noise_model=opt.noise_model)
-    if opt.initial_state:
+    start = start_transient(recording, forward, opt.initial_state)
+    if start["fitted"]:
         like.set_initial_state(True)
     post = LogPosterior(like, prior_set)
     m = find_map(post, opt.map_method)
@@ -271,6 +293,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         "fast_path": forward.fast,
         "excitation_port": forward.port,
         "n_bands": like.n_bands,
+        "start_transient": start,
         "seed": opt.seed,
     }
     nominal = None

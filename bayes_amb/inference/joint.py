@@ -296,7 +296,8 @@ def _on_bound(v: float, bound: tuple[float | None, float | None]) -> bool:
 def _record_block(rec: Recording, res: Identification) -> RecordFit:
     return RecordFit(recording=str(rec.source), speed_rpm=rec.speed_rpm, dt=rec.dt,
                      excitation_port=res.excitation_port, map=res.map,
-                     noise=res.noise.map, adequacy=res.adequacy, parameters=res.parameters)
+                     noise=res.noise.map, adequacy=res.adequacy, parameters=res.parameters,
+                     start_transient=res.start_transient)
 
 
 def _joint_adequacy(own: list[Identification], bad: list[int]) -> dict[str, Any]:

@@ -282,24 +282,25 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
         source = noise.colour.source or "the record given"
         notes.append(f"the colour was measured on one record ({source}): identify's sd "
                      "varies between records of one rig, with the white intensities it fits "
-                     "on each; on replicate foreign records its mean was 0.83-1.20 x such a "
-                     "prediction, 0.93-1.11 with their start transient fitted "
-                     "(--initial-state; studies/plan_replicates.py)")
+                     "on each; on replicate foreign records its mean was 0.93-1.11 x such a "
+                     "prediction with their start transient fitted, as identify does by "
+                     "default (0.83-1.20 with --no-initial-state; "
+                     "studies/plan_replicates.py)")
     speed = rig.nominal_speed_rpm if speed_rpm is None else float(speed_rpm)
     return Plan(design=design, noise=noise, speed_rpm=speed, parameters=pars,
                 f_max_hz=info.f_max_hz, n_bins=info.n_bins, notes=notes,
                 theta={n: float(v) for n, v in zip(names, th, strict=True)})
 
 
-def noise_from(recording: Recording, initial_state: bool = False) -> Noise:
+def noise_from(recording: Recording, initial_state: bool | None = None) -> Noise:
     """The noise of an earlier recording: the white intensities identify fits on it (its
     MAP of the eight bearing coefficients and the three white sources; no sampling, no
-    adequacy test; ``initial_state``: with the record's start transient fitted, as
-    identify --initial-state fits it) and the colour of its residual there (colour.py)."""
+    adequacy test; ``initial_state``: the record's start transient fitted or not, None as
+    identify decides by default) and the colour of its residual there (colour.py)."""
     return recorded(recording, initial_state)[0]
 
 
-def recorded(recording: Recording, initial_state: bool = False
+def recorded(recording: Recording, initial_state: bool | None = None
              ) -> tuple[Noise, dict[str, float]]:
     """:func:`noise_from`, and identify's MAP of the eight bearing coefficients on the
     same fit: the estimate a plan from that record is made at (``plan --noise-from``;

@@ -109,6 +109,17 @@ class Noise(Block):
 
 
 @block
+class StartTransient(Block):
+    """Whether identify fitted the record's start transient, and why (IdentifyOptions
+    .initial_state; by default the data check decides): ``start_difference`` is the
+    controller's start-up difference as a share of u's RMS, when it was checked."""
+
+    fitted: bool
+    reason: str
+    start_difference: float | None = omitted()
+
+
+@block
 class LaplaceCov(Block):
     """The Laplace covariance of theta at the MAP (normalised units), with its names."""
 
@@ -146,6 +157,7 @@ class RecordFit(Block):
     parameters: dict[str, Posterior]
     noise_posterior: dict[str, NoisePosterior] | None = omitted()
     noise_check: NoiseCheck | None = omitted()
+    start_transient: StartTransient | None = omitted()
 
 
 @block
@@ -167,6 +179,7 @@ class Identification(Block):
     fast_path: Any = omitted()
     excitation_port: Any = omitted()
     n_bands: int | None = omitted()
+    start_transient: StartTransient | None = omitted()
     seed: int = 0
     adequacy: Adequacy | None = omitted()
     inference: str
@@ -198,6 +211,8 @@ class Identification(Block):
         lines = [f"{self.inference}; converged: {self.converged}"]
         if self.adequacy is not None:
             lines.append(self.adequacy.line)
+        if self.start_transient is not None and self.start_transient.fitted:
+            lines.append(f"start transient fitted ({self.start_transient.reason})")
         w = max(len(n) for n in self.parameters)
         for n, p in self.parameters.items():
             lines.append(f"{n:<{w}}  {p.mean:+.4f} +- {p.sd:.4f}  "
