@@ -151,3 +151,19 @@ def test_diagnose_benchmark_names_the_hidden_lag():
         d["full_screen_cpu_s"] / d["cpu_s"])
     text = format_text(doc)
     assert "diagnose" in text and "actuator_lag" in text and "full screens" in text
+
+
+def test_transient_benchmark_fits_the_start_by_default():
+    """`bench --only transient --quick`: on its record, which starts mid-operation, the
+    default fits the transient, and that narrows the intervals; the row and detail print."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["bench", "--only", "transient", "--quick", "--json"])
+    assert code == 0, err.getvalue()
+    doc = json.loads(out.getvalue())
+    t = doc["transient"]
+    assert t["fitted_by_default"] is True
+    assert t["cost"] == pytest.approx(t["fitted_s"] / t["noise_s"])
+    assert set(t["sd_ratio"]) == {"k_By", "c_By"} and max(t["sd_ratio"].values()) < 1
+    text = format_text(doc)
+    assert "start transient fitted" in text and "sd fitted / as noise" in text

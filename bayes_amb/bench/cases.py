@@ -345,10 +345,19 @@ def bench_plan(quick: bool = False) -> Result:
     return run(quick)
 
 
+def bench_transient(quick: bool = False) -> Result:
+    """identify on a record that starts mid-operation, its start transient fitted (the
+    default there) against taken as noise (bayes_amb.bench.transient_case)."""
+    from bayes_amb.bench.transient_case import bench_transient as run
+
+    return run(quick)
+
+
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
     "simulate": bench_simulate, "map": bench_map, "diagnose": bench_diagnose,
-    "cli": bench_cli, "study": bench_study, "plan": bench_plan}
+    "cli": bench_cli, "study": bench_study, "plan": bench_plan,
+    "transient": bench_transient}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
 """What ``bayes-amb bench`` runs without --only (the diagnosis, the CLI runs and the study

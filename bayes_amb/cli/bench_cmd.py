@@ -87,6 +87,10 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         rows.append(("plan", f"{r['plan_s']:.2f} s (target {r['requirement_s']:g} s)",
                      f"{r['study_s']:.0f} s: 50 identifications of {r['identify_s']:.1f} s",
                      f"{r['speedup']:.0f}x"))
+    if "transient" in d:
+        r = d["transient"]
+        rows.append(("transient", f"{r['fitted_s']:.1f} s, start transient fitted",
+                     f"{r['noise_s']:.1f} s, taken as noise", f"{1 / r['cost']:.2f}x"))
     if "study" in d:
         r = d["study"]
         rows.append(("study", f"{r['n_replicates']} replicates in {r['wall_s']:.0f} s "
@@ -154,6 +158,16 @@ def _details(d: dict[str, Any]) -> list[str]:
                    f"baseline: the same diagnosis with every candidate screened fully (no "
                    f"pre-screening), same verdict and names; target median "
                    f"{r['target_median_s']:g} s CPU over the foreign benchmark")
+    if "transient" in d:
+        r = d["transient"]
+        sds = ", ".join(f"{k} {v:.2f}" for k, v in r["sd_ratio"].items())
+        out.append(f"transient: a record that starts mid-operation (cut 0.3 s after its "
+                   f"start), {len(r['sd_ratio'])} coefficients, the user's defaults; fitted "
+                   f"by the data check: {r['fitted_by_default']}; sampling "
+                   f"{r['posterior_s_fitted']:.1f} s "
+                   f"({r['evals_fitted']} evaluations) against {r['posterior_s_noise']:.1f} s "
+                   f"({r['evals_noise']}); {'converged' if r['converged'] else 'NOT converged'}"
+                   f"; sd fitted / as noise: {sds}")
     if "cli" in d:
         r = d["cli"]
         out.append(f"cli: `{r['command']}`, {r['repeats']} runs per environment, interleaved;"

@@ -1,0 +1,79 @@
+"""``bayes-amb bench --only transient``: what fitting a record's start transient costs.
+
+A rig's record starts mid-operation, and identify then fits the free response of the loop's
+states at its first sample by default (IdentifyOptions.initial_state; the data check
+decides). The benchmark record is such a record: the reference rig with all eight bearing
+coefficients set (reduced truth, TRUE_8), 50 nm sensor noise and r2 0.02 A, simulated for
+1.3 s at 10 kHz and cut 0.3 s after its start. Side by side in the same process, the
+baseline first: identify of the eight coefficients with the user's defaults (the transient
+fitted; the adequacy test included, the same on both sides) and with
+``initial_state=False`` (the transient taken as noise), each sampled to its own stopping
+rule. The cost is the ratio of their wall times; what it buys
+is the ratio of their sds (the transient as noise widens the intervals, and on the foreign
+generator leaves them up to twice too wide: README, "A record that starts mid-operation").
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass
+
+from bayes_amb.bench.recordings import make_recording
+from bayes_amb.bench.results import Result
+from bayes_amb.io.recording import Recording
+
+
+@dataclass(frozen=True)
+class TransientBench(Result):
+    """fitted_s, noise_s: identify wall time (s) with the transient fitted (the default on
+    this record) and taken as noise; posterior_s_*: the sampler's part of each;
+    evals_*: likelihood evaluations of each run; cost: fitted_s / noise_s (the option's
+    price, above 1: it costs more); sd_ratio: per parameter, the sd with the transient
+    fitted over the sd without (below 1: narrower); fitted_by_default: the data check
+    chose to fit it; converged: both runs met the stopping rule."""
+
+    fitted_s: float
+    noise_s: float
+    posterior_s_fitted: float
+    posterior_s_noise: float
+    evals_fitted: int
+    evals_noise: int
+    cost: float
+    sd_ratio: dict[str, float]
+    fitted_by_default: bool
+    converged: bool
+
+
+def mid_operation_record(quick: bool = False) -> Recording:
+    """The benchmark record: simulated from rest, its first 0.3 s cut away."""
+    from bayes_amb.bench.cases import TRUE_8
+
+    rec = make_recording("reduced", TRUE_8, 1e-4, 0.5 if quick else 1.3, seed=4,
+                         noise_rms=5e-8, r2_rms=0.02)
+    cut = slice(round(0.3 / rec.dt), None)
+    return dataclasses.replace(rec, t=rec.t[cut] - rec.t[cut][0], y=rec.y[cut],
+                               u=rec.u[cut], excitation={k: v[cut] for k, v in
+                                                         rec.excitation.items()})
+
+
+def bench_transient(quick: bool = False) -> TransientBench:
+    from bayes_amb.bench.cases import PARAMS_8
+    from bayes_amb.inference.identify import IdentifyOptions, identify
+
+    names = ("k_By", "c_By") if quick else PARAMS_8
+    rec = mid_operation_record(quick)
+    steps = 100 if quick else None
+    runs: dict[bool | None, tuple[float, object]] = {}
+    for choice in (False, None):       # the baseline first, as the posterior benchmark does
+        t0 = time.perf_counter()
+        res = identify(rec, names, options=IdentifyOptions(steps=steps, initial_state=choice))
+        runs[choice] = (time.perf_counter() - t0, res)
+    (t_on, on), (t_off, off) = runs[None], runs[False]
+    return TransientBench(
+        fitted_s=t_on, noise_s=t_off, posterior_s_fitted=on.sampler.wall_s,
+        posterior_s_noise=off.sampler.wall_s, evals_fitted=on.sampler.likelihood_evals,
+        evals_noise=off.sampler.likelihood_evals, cost=t_on / t_off,
+        sd_ratio={n: float(on.parameters[n].sd / off.parameters[n].sd) for n in names},
+        fitted_by_default=bool(on.start_transient.fitted),
+        converged=bool(on.converged and off.converged))
