@@ -79,3 +79,20 @@ def test_by_default_the_data_check_decides(records):
     assert start["start_difference"] > 0.01 > got["rest"]["start_transient"]["start_difference"]
     assert got["mid"]["parameters"] == _fit(mid, True)["parameters"]
     assert _fit(mid, False)["start_transient"]["reason"] == "--no-initial-state"
+
+
+def test_a_record_whose_u_the_controller_does_not_reproduce_gets_it_fitted(records):
+    """A measured current (here u with 1 % noise) differs from the controller's output
+    throughout, which hides a start-up difference: the check cannot tell, and says so."""
+    import numpy as np
+
+    from bayes_amb.inference.forward import ForwardModel
+    from bayes_amb.inference.identify import start_transient
+
+    rest, _ = records
+    rng = np.random.default_rng(2)
+    noisy = dataclasses.replace(rest, u=rest.u + 0.01 * rest.u.std() *
+                                rng.standard_normal(rest.u.shape))
+    got = start_transient(noisy, ForwardModel(noisy, ("k_By",)))
+    assert got["fitted"] is True and "cannot be told" in got["reason"]
+    assert start_transient(rest, ForwardModel(rest, ("k_By",)))["fitted"] is False
