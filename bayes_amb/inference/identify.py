@@ -225,9 +225,9 @@ def start_transient(recording: Recording, forward: ForwardModel,
                  " % of u)")
     elif not st.told:
         where = (f"the recorded u differs from the documented controller's output by "
-                 f"{100 * st.rel_tail:.2g} % throughout (an amplifier limit, a measured "
-                 "current), so whether the record starts at rest cannot be told: fitted to be "
-                 "safe")
+                 f"{100 * st.rel_tail:.2g} % throughout (a measured current, a DAQ's resolution, "
+                 "an amplifier limit), so whether the record starts at rest cannot be told: "
+                 "fitted to be safe")
     else:
         where = "the record starts at rest"
     return {"fitted": not (st.at_rest and st.told), "reason": f"data check: {where}",
