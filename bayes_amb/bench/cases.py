@@ -26,7 +26,7 @@ from bayes_amb.bench.baselines import (
     naive_eval_us,
     naive_log_likelihood,
 )
-from bayes_amb.bench.recordings import make_recording
+from bayes_amb.bench.recordings import PARAMS_8, TRUE_8, make_recording
 from bayes_amb.bench.results import (
     BenchmarkError,
     LikelihoodBench,
@@ -53,8 +53,6 @@ from bayes_amb.threads import limited_threads
 
 log = logging.getLogger(__name__)
 
-PARAMS_8 = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
-TRUE_8 = dict(zip(PARAMS_8, (0.1, -0.1, 0.2, 0.5, 0.3, -0.2, 0.1, 0.0), strict=True))
 CHECK_RTOL = 1e-9  # largest relative difference allowed between the two sides
 LIKELIHOOD_TARGET_US = 50.0   # issue 16: one evaluation, 8 parameters, 5000 x 4, batch 32
 

@@ -8,6 +8,10 @@ from bayes_amb.io.recording import Recording
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 
+PARAMS_8 = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
+TRUE_8 = dict(zip(PARAMS_8, (0.1, -0.1, 0.2, 0.5, 0.3, -0.2, 0.1, 0.0), strict=True))
+"""The benchmarks' eight bearing coefficients and their true values."""
+
 
 def make_recording(truth: str, params: dict[str, float], dt: float, duration: float,
                    seed: int = 1, **noise: float) -> Recording:

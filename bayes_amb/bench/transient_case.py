@@ -19,7 +19,7 @@ import dataclasses
 import time
 from dataclasses import dataclass
 
-from bayes_amb.bench.recordings import make_recording
+from bayes_amb.bench.recordings import PARAMS_8, TRUE_8, make_recording
 from bayes_amb.bench.results import Result
 from bayes_amb.io.recording import Recording
 
@@ -47,8 +47,6 @@ class TransientBench(Result):
 
 def mid_operation_record(quick: bool = False) -> Recording:
     """The benchmark record: simulated from rest, its first 0.3 s cut away."""
-    from bayes_amb.bench.cases import TRUE_8
-
     rec = make_recording("reduced", TRUE_8, 1e-4, 0.5 if quick else 1.3, seed=4,
                          noise_rms=5e-8, r2_rms=0.02)
     cut = slice(round(0.3 / rec.dt), None)
@@ -58,7 +56,6 @@ def mid_operation_record(quick: bool = False) -> Recording:
 
 
 def bench_transient(quick: bool = False) -> TransientBench:
-    from bayes_amb.bench.cases import PARAMS_8
     from bayes_amb.inference.identify import IdentifyOptions, identify
 
     names = ("k_By", "c_By") if quick else PARAMS_8
