@@ -37,14 +37,19 @@ TIMES = {"likelihood": ("likelihood_us", "baseline_us", "numpy_path_us", "previo
          "simulate": ("simulate_s", "baseline_s")}
 
 
+def _bench_json(*args: str) -> dict:
+    """`bayes-amb bench --quick --json ARGS`: its JSON (the command must succeed)."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        code = main(["bench", "--quick", "--json", *args])
+    assert code == 0, err.getvalue()
+    return json.loads(out.getvalue())
+
+
 @pytest.fixture(scope="module")
 def bench_json():
     """`bayes-amb bench --quick --json`, run once for the module."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(["bench", "--quick", "--json"])
-    assert code == 0, err.getvalue()
-    return json.loads(out.getvalue())
+    return _bench_json()
 
 
 def test_json_has_every_benchmark_and_key(bench_json):
@@ -139,11 +144,7 @@ def test_study_throughput_row(bench_json):
 def test_diagnose_benchmark_names_the_hidden_lag():
     """`bench --only diagnose --quick`: the diagnosis it times names the lag it hides (the
     benchmark raises BenchmarkError otherwise); its row and detail line are printed."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(["bench", "--only", "diagnose", "--quick", "--json"])
-    assert code == 0, err.getvalue()
-    doc = json.loads(out.getvalue())
+    doc = _bench_json("--only", "diagnose")
     d = doc["diagnose"]
     assert "actuator_lag" in d["effects"] and d["n_samples"] == 5000
     assert math.isfinite(d["cpu_s"]) and d["cpu_s"] > 0 and d["target_median_s"] == 20
@@ -156,11 +157,7 @@ def test_diagnose_benchmark_names_the_hidden_lag():
 def test_transient_benchmark_fits_the_start_by_default():
     """`bench --only transient --quick`: on its record, which starts mid-operation, the
     default fits the transient, and that narrows the intervals; the row and detail print."""
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        code = main(["bench", "--only", "transient", "--quick", "--json"])
-    assert code == 0, err.getvalue()
-    doc = json.loads(out.getvalue())
+    doc = _bench_json("--only", "transient")
     t = doc["transient"]
     assert t["fitted_by_default"] is True
     assert t["cost"] == pytest.approx(t["fitted_s"] / t["noise_s"])

@@ -29,11 +29,7 @@ def records():
     rec, _ = design_recording(*rig_ctrl, Design(amplitude=0.5, duration=1.5),
                               Noise(noise_rms=5e-8), theta=TRUTH, seed=7)
     n0 = round(0.5 / rec.dt)
-
-    def part(sl):
-        return dataclasses.replace(rec, t=rec.t[sl] - rec.t[sl][0], y=rec.y[sl], u=rec.u[sl],
-                                   excitation={k: v[sl] for k, v in rec.excitation.items()})
-    return part(slice(0, rec.t.size - n0)), part(slice(n0, None))
+    return rec.part(slice(0, rec.n_samples - n0)), rec.part(slice(n0, None))
 
 
 def _fit(rec, on):

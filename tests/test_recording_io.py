@@ -315,6 +315,20 @@ def test_make_recording_validates(kwargs, match):
         make_recording(**args)
 
 
+def test_part_is_a_record_cut_from_the_longer_one():
+    y, u, exc = arrays(("eta", "r2"))
+    rec = make_recording(y=y, u=u, excitation=exc, dt=DT,
+                         controller=load_controller(controller_dict(dt=DT)))
+    cut = rec.part(slice(5, None))
+    assert cut.n_samples == N - 5 and cut.t[0] == 0.0
+    np.testing.assert_allclose(cut.t, rec.t[5:] - rec.t[5])
+    np.testing.assert_array_equal(cut.y, rec.y[5:])
+    np.testing.assert_array_equal(cut.u, rec.u[5:])
+    assert set(cut.excitation) == {"eta", "r2"}
+    np.testing.assert_array_equal(cut.excitation["r2"], rec.excitation["r2"][5:])
+    assert cut.controller is rec.controller and cut.dt == rec.dt
+
+
 # ------------------------------------------------------------------ atomic writes
 def test_atomic_path_leaves_no_partial_file(tmp_path):
     target = tmp_path / "out.txt"

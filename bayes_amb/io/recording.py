@@ -41,7 +41,7 @@ from __future__ import annotations
 
 import csv
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
@@ -175,6 +175,14 @@ class Recording:
     def n_samples(self) -> int:
         """Number of samples N."""
         return self.t.shape[0]
+
+    def part(self, samples: slice) -> Recording:
+        """The samples ``samples`` of this recording as a recording of their own, its time
+        from zero: a record cut from a longer one (a record that starts mid-operation,
+        when the cut is after the start)."""
+        t = self.t[samples]
+        return replace(self, t=t - t[0], y=self.y[samples], u=self.u[samples],
+                       excitation={k: v[samples] for k, v in self.excitation.items()})
 
 
 def require_excitation(recording: Recording) -> None:
