@@ -1,10 +1,14 @@
-"""Issue 31: the typed results change no number. Ten foreign recordings are diagnosed and
-five identified with default options, as main did before the typed results landed
-(tests/golden/, written by ``python -m tests.golden.cases`` at c936d8d); every key and
-value of ``diagnosis.json`` and ``summary.json`` must match (floats to a relative 1e-4,
-timings and versions aside). The saved folders must load back to the same objects."""
+"""No change moves a result unnoticed. Ten foreign recordings are diagnosed and five
+identified with default options (tests/golden/, written by ``python -m tests.golden.cases``);
+every key and value of ``diagnosis.json`` and ``summary.json`` must match its golden copy,
+each number on its own scale (tests/golden/compare.py: estimates within a hundredth of
+their posterior sd, sampled ones within their Monte Carlo error, p-values on the decision
+scale; words, names and verdicts exactly), so the files hold on another CPU. The saved
+folders must load back to the same objects."""
 
 from __future__ import annotations
+
+import json
 
 import pytest
 
@@ -14,11 +18,11 @@ from tests.golden.cases import (
     DIAGNOSED,
     IDENTIFIED,
     diagnosis_json,
-    differences,
     golden_path,
     read_golden,
     summary_json,
 )
+from tests.golden.compare import differences
 
 
 @pytest.fixture(scope="module")
@@ -52,3 +56,20 @@ def test_summary_json_is_what_main_wrote(work, kind, index, sampled):
     assert loaded.parameters["k_Ax"].mean == got["parameters"]["k_Ax"]["mean"]
     assert (result_json_text(loaded.to_dict())
             == (work / "ident" / f"{kind}_{index:02d}" / "summary.json").read_text())
+
+
+def test_a_real_change_fails_the_golden_comparison(work):
+    """The same record with its last tenth cut off: a real, small change of the data, which
+    moves the estimates by a fraction of their sd. The comparison must see it."""
+    from bayes_amb import IdentifyOptions, identify, load_recording
+    from bayes_amb.discrepancy.library import BEARING_COEFFICIENTS
+    from tests.golden.cases import record
+
+    (work / "cut").mkdir(exist_ok=True)
+    rec = load_recording(record(work / "cut", "control", 6))
+    cut = rec.part(slice(0, int(0.9 * rec.t.size)))
+    res = identify(cut, list(BEARING_COEFFICIENTS), options=IdentifyOptions(map_only=True))
+    run = res.save(work / "cut" / "ident")
+    got = json.loads((run / "summary.json").read_text())
+    diff = differences(got, read_golden(golden_path("control", 6, "summary")))
+    assert any(".parameters." in d for d in diff), diff[:5]

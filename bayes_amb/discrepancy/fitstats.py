@@ -21,7 +21,7 @@ from bayes_amb.discrepancy.locate import (
     whiten,
     whitened_series,
 )
-from bayes_amb.inference.posterior import stretch_draws
+from bayes_amb.inference.posterior import gaussian_draws, stretch_draws
 from bayes_amb.rig import CHANNELS
 from bayes_amb.uncertainty import get_spec
 
@@ -89,7 +89,7 @@ def draws(fitted: FittedModel, n: int = 4000, seed: int = 0) -> NDArray:
             mean, cov = mean + me.shift, me.cov[:p, :p]
         if extra is not None:
             cov = cov + extra
-        d = rng.multivariate_normal(mean, cov, size=n, method="eigh")
+        d = gaussian_draws(rng, mean, cov, n)
     rng = np.random.default_rng(seed + 1)
     for j, (lo, hi) in enumerate(bounds):
         d[:, j] = np.clip(d[:, j], -np.inf if lo is None else lo, np.inf if hi is None else hi)

@@ -33,8 +33,8 @@ from bayes_amb.rotor import assemble, state_matrices
 from bayes_amb.rotor.assembly import RotorMatrices
 from bayes_amb.uncertainty import get_spec, lft_reduced, physical_change
 
-__all__ = ["MODEL_KINDS", "MODE_LABELS", "LoopModes", "closed_loop_modes", "log_decrement",
-           "plant_matrices"]
+__all__ = ["API617_LOGDEC", "MODEL_KINDS", "MODE_LABELS", "LoopModes", "closed_loop_modes",
+           "log_decrement", "plant_matrices"]
 
 MODEL_KINDS = ("full", "reduced")
 ZETA_MODE = 0.9
@@ -44,6 +44,9 @@ N_RIGID_PAIRS = 4
 RIGID_SHARE = 0.5
 """A closed-loop mode is a rigid-body mode when more than this share of its kinetic energy
 is rigid-body motion (:func:`closed_loop_modes`)."""
+API617_LOGDEC = 0.1
+"""API 617-style stability criterion: every closed-loop mode with log dec > 0.1."""
+
 MODE_LABELS = ("rigid 1", "rigid 2", "rigid 3", "rigid 4", "bending 1 (lower)",
                "bending 1 (upper)")
 """Labels of the reported closed-loop modes, in the order of :attr:`LoopModes.lam`."""

@@ -28,8 +28,14 @@ from numpy.typing import NDArray
 from scipy.optimize import minimize_scalar
 
 from bayes_amb.engineering.intervals import CentralRegion, central_region, interval90
-from bayes_amb.engineering.loop import MODE_LABELS, closed_loop_modes, log_decrement
+from bayes_amb.engineering.loop import (
+    API617_LOGDEC,
+    MODE_LABELS,
+    closed_loop_modes,
+    log_decrement,
+)
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.posterior import gaussian_draws
 from bayes_amb.io.recording import Recording
 from bayes_amb.results.engineering import EngineeringAnswers
 from bayes_amb.results.identification import Identification
@@ -40,8 +46,6 @@ from bayes_amb.uncertainty import get_spec, parse_param_list
 __all__ = ["API617_LOGDEC", "Draws", "EngineeringResult", "Quantity", "draws_from",
            "physical_quantities", "required_separation_margin"]
 
-API617_LOGDEC = 0.1
-"""API 617-style stability criterion: every closed-loop mode with log dec > 0.1."""
 
 @dataclass(frozen=True)
 class Draws:
@@ -98,8 +102,7 @@ def draws_from(source: Any, n_draws: int = 200, seed: int = 0) -> Draws:
     lc = ident.laplace_cov
     if lc is not None and tuple(lc.names) == names:
         cov = np.asarray(lc.theta, dtype=float)
-        return Draws(names, rng.multivariate_normal(mean, cov, size=n_draws,
-                                                    method="eigh"))
+        return Draws(names, gaussian_draws(rng, mean, cov, n_draws))
     return Draws(names, mean + sd * rng.standard_normal((n_draws, len(names))))
 
 

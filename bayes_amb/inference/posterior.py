@@ -87,6 +87,24 @@ def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,
     return out
 
 
+def gaussian_draws(rng: np.random.Generator, mean: NDArray, cov: NDArray, n: int
+                   ) -> NDArray:
+    """n draws (n, p) of N(mean, cov), as mean + L z with L the Cholesky factor of cov.
+
+    The Cholesky factor is a continuous function of cov, so the same seed gives the same
+    draws, up to rounding, on any CPU. An eigendecomposition (numpy's default) is not: where
+    two eigenvalues are close, rounding can turn their eigenvectors, and every draw with
+    them. A cov that is only semi-definite (a direction with no variance) falls back to the
+    eigendecomposition."""
+    mean = np.asarray(mean, dtype=float)
+    cov = np.asarray(cov, dtype=float)
+    try:
+        L = np.linalg.cholesky(cov)
+    except np.linalg.LinAlgError:
+        return rng.multivariate_normal(mean, cov, size=n, method="eigh")
+    return mean + rng.standard_normal((n, mean.size)) @ L.T
+
+
 def stretch_draws(d: NDArray, centre: NDArray, cov: NDArray, cov_new: NDArray) -> NDArray:
     """Draws d (..., p) moved so that their spread about centre goes from cov to cov_new
     (the open-faced sandwich adjustment of Shaby 2014; free dimensions only: those with

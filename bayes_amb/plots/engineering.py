@@ -60,7 +60,7 @@ def plot_modes_vs_speed(res: Any) -> Figure:
     """Frequency and log decrement of each closed-loop mode against speed (median and 90 %
     interval over posterior draws, ``res.interval``: the tables' interval), the 1x
     running-speed line and the API 617 log-dec limit 0.1."""
-    from bayes_amb.engineering import API617_LOGDEC, MODE_LABELS, log_decrement
+    from bayes_amb.engineering.loop import API617_LOGDEC, MODE_LABELS, log_decrement
 
     fig = new_figure((7.2, 3.9))
     ax_f, ax_d = fig.subplots(1, 2)

@@ -1,0 +1,109 @@
+"""The golden comparison (tests/golden/compare.py) passes rounding and catches results that
+really changed: each rule is shown to let through what another CPU does and to fail on a
+change of the size that matters on its own scale."""
+
+from __future__ import annotations
+
+import copy
+import json
+
+import pytest
+
+from tests.golden.cases import golden_path, read_golden
+from tests.golden.compare import SD_FRACTION, differences
+
+
+def _golden(name: str, what: str) -> dict:
+    kind, index = name.rsplit("_", 1)
+    return read_golden(golden_path(kind, int(index), what))
+
+
+def _rounded(x, rel: float = 1e-7):
+    """Every float moved by a relative ``rel`` (alternating sign): what rounding does."""
+    if isinstance(x, dict):
+        return {k: _rounded(v, rel) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_rounded(v, rel * (-1) ** i) for i, v in enumerate(x)]
+    if isinstance(x, float):
+        return x * (1 + rel)
+    return x
+
+
+@pytest.mark.parametrize(("name", "what"), [("control_06", "summary"),
+                                            ("control_force_07", "summary"),
+                                            ("seal_07", "diagnosis"),
+                                            ("full_truth_04", "diagnosis")])
+def test_rounding_passes(name, what):
+    gold = _golden(name, what)
+    assert differences(gold, gold) == []
+    assert differences(_rounded(gold), gold) == []
+
+
+def test_a_map_estimate_moved_by_a_twentieth_of_its_sd_fails():
+    gold = _golden("control_06", "summary")
+    got = copy.deepcopy(gold)
+    par = got["parameters"]["k_Ay"]
+    par["mean"] += 5 * SD_FRACTION * par["sd"]
+    diff = differences(got, gold)
+    assert len(diff) == 1 and "parameters.k_Ay.mean" in diff[0]
+    got = copy.deepcopy(gold)
+    got["parameters"]["c_Bx"]["hdi90"][0] -= 0.25 * gold["parameters"]["c_Bx"]["sd"]
+    assert any("c_Bx.hdi90[0]" in d for d in differences(got, gold))
+    got = copy.deepcopy(gold)
+    got["parameters"]["c_Bx"]["sd"] *= 1.05
+    assert any("c_Bx.sd" in d for d in differences(got, gold))
+
+
+def test_a_sampled_estimate_is_compared_within_its_monte_carlo_error():
+    gold = _golden("control_force_07", "summary")
+    name = "k_Ax"
+    sd, ess = gold["parameters"][name]["sd"], gold["parameters"][name]["ess_bulk"]
+    got = copy.deepcopy(gold)
+    got["parameters"][name]["mean"] += sd / ess**0.5         # one Monte Carlo error
+    assert differences(got, gold) == []
+    got["parameters"][name]["mean"] += 0.5 * sd                # half a posterior sd
+    assert any(f"parameters.{name}.mean" in d for d in differences(got, gold))
+
+
+def test_words_names_and_verdicts_are_exact():
+    gold = _golden("seal_07", "diagnosis")
+    for change in (lambda d: d.update(verdict="explained"),
+                   lambda d: d["explanations"][0].update(effect="unbalance"),
+                   lambda d: d["explanations"][0].update(confidence="confident"),
+                   lambda d: d["adequacy"].update(adequate=True),
+                   lambda d: d["adequacy"]["channels"].pop(),
+                   lambda d: d["candidates"].pop(3)):
+        got = copy.deepcopy(gold)
+        change(got)
+        assert differences(got, gold), change
+
+
+def test_candidates_tie_in_any_order_but_not_in_their_evidence():
+    gold = _golden("seal_07", "diagnosis")
+    got = copy.deepcopy(gold)
+    got["candidates"].reverse()
+    assert differences(got, gold) == []
+    scored = next(c for c in got["candidates"] if isinstance(c.get("log_bayes_factor"), float))
+    scored["log_bayes_factor"] += 1.0
+    assert any("log_bayes_factor" in d for d in differences(got, gold))
+
+
+def test_p_values_on_the_decision_scale():
+    def with_p(p):
+        return {"mismatch": {"evidence": {"p_adjusted_min": p}}}
+    assert differences(with_p(1e-20), with_p(1e-12)) == []         # decisive either way
+    assert differences(with_p(0.0102), with_p(0.0100)) == []
+    assert differences(with_p(0.02), with_p(0.01))                  # across alpha
+    assert differences(with_p(1e-4), with_p(1e-9))
+
+
+def test_a_check_on_rounding_compares_no_p_value():
+    def check(diff, p):
+        return {"checks": [{"check": "controller", "relative_difference": diff, "p_adjusted": p}]}
+    assert differences(check(1.2e-14, 0.03), check(1.5e-14, 0.07)) == []
+    assert differences(check(1.2e-3, 0.03), check(1.5e-14, 0.07))
+
+
+def test_a_golden_file_is_plain_json():
+    gold = _golden("control_06", "summary")
+    assert json.loads(json.dumps(gold)) == gold
