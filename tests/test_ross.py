@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from bayes_amb.errors import RigError
-from bayes_amb.rig import load_rig
+from bayes_amb.rig import load_rig, rig_difference
 from bayes_amb.rotor import full_model
 from tests.helpers import run_cli
 
@@ -63,9 +63,11 @@ def test_converted_rig_has_the_ross_eigenvalues(tmp_path, capsys):
 def test_what_a_rig_cannot_hold_is_one_line(tmp_path, capsys):
     from bayes_amb.rig.ross import rig_from_ross
 
-    with pytest.raises(RigError, match=r"shaft element 10: outer diameter \(left\) 0\.07 "
-                                       r"differs from element 0's 0\.06"):
-        rig_from_ross(_rotor(odl=(0.06,) * 10 + (0.07,) * 25), nominal_speed_rpm=1.0)
+    rotor = _rotor(odl=(0.06,) * 35)
+    rotor.shaft_elements[10].shear_effects = True
+    with pytest.raises(RigError, match=r"shaft element 10: shear_effects=True differs from "
+                                       r"element 0's False"):
+        rig_from_ross(rotor, nominal_speed_rpm=1.0)
     code, _, err = run_cli(["rig", "from-ross", str(tmp_path / "none.toml"), "-o",
                             str(tmp_path / "rig.toml")], capsys)
     assert code == 2 and err.count("\n") == 1 and "none.toml: field <file>: not found" in err
@@ -104,7 +106,6 @@ def test_shaft_damping_beta_is_carried(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("kw, match", [
-    ({"alpha": 0.5}, r"shaft element 0: mass-proportional damping alpha 0\.5 has no rig "),
     ({"rotary_inertia": False}, r"shaft element 0: rotary_inertia=False; a rig always"),
     ({"axial_force": 100.0}, r"shaft element 0: axial force 100\.0 has no rig equivalent"),
 ])
@@ -113,3 +114,104 @@ def test_what_ross_holds_and_a_rig_cannot_is_refused(kw, match):
 
     with pytest.raises(RigError, match=match):
         rig_from_ross(_rotor(**kw), nominal_speed_rpm=1.0)
+
+
+EXAMPLES = ("rotor_example_amb_simple", "rotor_example_amb_general_controllers",
+            "rotor_example_amb_complex_controllers")
+
+
+def _ross_open_loop(rotor, speed_rpm: float) -> np.ndarray:
+    """Eigenvalues of ROSS's own matrices of the bare rotor (Rotor.M, K, C, G of the shaft and
+    discs; lateral DOFs), each magnet's ROSS ks added at its node: the open-loop plant."""
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        bare = rs.Rotor(rotor.shaft_elements, rotor.disk_elements)
+        M, K, C, G = bare.M(0), bare.K(0), bare.C(0), bare.G()
+    lat = [i for i in range(M.shape[0]) if i % 6 in (0, 1, 3, 4)]
+    M, K, C, G = (X[np.ix_(lat, lat)] for X in (M, K, C, G))
+    for b in rotor.bearing_elements:
+        for ax in (0, 1):
+            K[4 * b.n + ax, 4 * b.n + ax] += b.ks
+    n, Mi, w = M.shape[0], np.linalg.inv(M), speed_rpm * 2 * np.pi / 60
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-Mi @ K, -Mi @ (C + w * G)]])
+    return np.linalg.eigvals(A)
+
+
+def _rigid_and_bending(poles: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    lam = poles[np.argsort(np.abs(poles), kind="stable")]
+    return np.sort(lam[:8][lam[:8].real > 0].real), lam[8:][lam[8:].imag > 0][:4]
+
+
+@pytest.mark.parametrize("example", EXAMPLES)
+def test_rosss_amb_examples_convert_with_rosss_eigenvalues(example, tmp_path, capsys):
+    """All three AMB rotors ROSS ships convert, live (the notebook path) and saved (the CLI
+    path), and the open-loop plant has ROSS's unstable poles and first four bending modes
+    within 0.1 % (they agree to 1e-7)."""
+    amb_models = pytest.importorskip("ross.bearings.magnetic.amb_models")
+
+    from bayes_amb.rig.ross import rig_from_ross
+
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rotor = getattr(amb_models, example)()
+        rotor.save(tmp_path / "rotor.toml")
+    live = rig_from_ross(rotor, nominal_speed_rpm=3000.0).rig
+    code, out, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"), "--speed-rpm",
+                              "3000", "-o", str(tmp_path / "rig.toml")], capsys)
+    assert code == 0, err
+    assert err == "" and out.startswith("wrote ")     # no raw library warnings
+    saved = load_rig(tmp_path / "rig.toml")
+    assert rig_difference(saved, live) is None         # ROSS's save rounds Poisson to 1e-16
+    ross_unstable, ross_bending = _rigid_and_bending(_ross_open_loop(rotor, 3000.0))
+    unstable, bending = _rigid_and_bending(full_model(saved, 3000.0).poles)
+    assert unstable == pytest.approx(ross_unstable, rel=1e-3)
+    assert np.max(np.abs(bending - ross_bending) / np.abs(ross_bending)) < 1e-3
+    assert np.max(np.abs(bending - ross_bending) / np.abs(ross_bending)) < 1e-7
+
+
+def test_rosss_real_rig_controllers_are_imported_and_checked():
+    """The real test rig's own controllers, each bearing its own transfer function: as ROSS
+    writes them they do not hold the rotor up once ks destabilises (a gain written twice),
+    and the refusal says why ROSS may show them stable; with the doubled factor removed they
+    stabilise the full plant (spectral radius 0.9926 at 3000 rpm and 10 kHz)."""
+    amb_models = pytest.importorskip("ross.bearings.magnetic.amb_models")
+
+    from bayes_amb.errors import DataImportError
+    from bayes_amb.io.ross_controller import controller_from_ross
+
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rotor = amb_models.rotor_example_amb_complex_controllers()
+    rig = load_rig("ross_test_rig")
+    with pytest.raises(DataImportError, match=r"spectral radius 1\.02\d+ .*at the magnets' "
+                       r"unstable rigid-body poles.*ROSS's time-domain simulation adds the "
+                       r"magnet's ks as a restoring spring") as e:
+        controller_from_ross(rotor, rig, dt=1e-4, speed_rpm=3000.0)
+    assert "\n" not in str(e.value)
+    imp = controller_from_ross(rotor, rig, dt=1e-4, speed_rpm=3000.0,
+                               scale={"A": 1 / 0.0062, "B": 1 / 0.0046})
+    assert imp.spectral_radius == pytest.approx(0.9926, abs=1e-4)
+    assert imp.controller.n_states > 8 and imp.zone in "ABCD"
+    assert imp.controller.design["ross_scale"] == {"A": 1 / 0.0062, "B": 1 / 0.0046}
+
+
+def test_a_saved_rotors_pid_controllers_import_from_the_cli(tmp_path, capsys):
+    amb_models = pytest.importorskip("ross.bearings.magnetic.amb_models")
+
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        amb_models.rotor_example_amb_simple().save(tmp_path / "simple.toml")
+        amb_models.rotor_example_amb_complex_controllers().save(tmp_path / "complex.toml")
+    assert run_cli(["rig", "from-ross", str(tmp_path / "simple.toml"), "--speed-rpm", "3000",
+                    "-o", str(tmp_path / "rig.toml")], capsys)[0] == 0
+    code, out, err = run_cli(["import-controller", "--from-ross", str(tmp_path / "simple.toml"),
+                              "--rig", str(tmp_path / "rig.toml"), "--dt", "1e-4", "-o",
+                              str(tmp_path / "c.json")], capsys)
+    assert code == 0 and err == "", err
+    assert "from ROSS bearing controllers (negative feedback)" in out
+    assert "marginal" in out                  # its integrator gain is 0.2: |z| = 1 - 2e-10
+    code, _, err = run_cli(["import-controller", "--from-ross", str(tmp_path / "complex.toml"),
+                            "--rig", "ross_test_rig", "--dt", "1e-4", "-o",
+                            str(tmp_path / "c2.json")], capsys)
+    assert code == 2 and err.count("\n") == 1
+    assert "bearing A (ROSS node 12): no controller" in err and "only as kxx and cxx" in err

@@ -8,8 +8,20 @@ from bayes_amb.cli.common import emit
 from bayes_amb.cli.options import real
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.reduction.fidelity import singular_value_data
-from bayes_amb.rig import check_speed_rpm, load_rig
+from bayes_amb.rig import Rig, check_speed_rpm, load_rig
 from bayes_amb.rotor import bending_frequencies_hz, full_model, unstable_poles
+
+
+def damping_text(rig: Rig, beta: float) -> str:
+    """The shaft's damping in words: 'C = beta*K_shaft, beta = 1.234e-06 s' (uniform), or
+    the element table's Rayleigh damping."""
+    if rig.shaft.uniform:
+        return f"C = beta*K_shaft, beta = {beta:.3e} s"
+    pairs = sorted({(e.alpha, e.beta) for e in rig.shaft.elements})
+    each = ", ".join(f"alpha {a:g} 1/s, beta {b:g} s" for a, b in pairs[:3])
+    more = f" (+{len(pairs) - 3} more)" if len(pairs) > 3 else ""
+    extra = f"; plus beta*K_shaft, beta = {beta:.3e} s" if beta else ""
+    return f"C = sum of alpha M_e + beta K_e per element: {each}{more}{extra}"
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -47,6 +59,7 @@ def model_summary(rig_path: str | None = None, speed_rpm: float | None = None) -
         "reduction_error_db": sv.max_gap_db(),
         "first_bending_rad_s": sv.first_bending_rad_s,
         "beta_s": fm.matrices.beta,
+        "damping": damping_text(rig, fm.matrices.beta),
     }
 
 
@@ -70,7 +83,7 @@ def format_summary(d: dict) -> str:
     poles = ", ".join(f"{re:.1f}{'+' if im >= 0 else '-'}{abs(im):.1f}j"
                       for re, im in d["reduced_poles"])
     lines.append(f"  reduced poles : {poles} rad/s")
-    lines.append(f"  damping       : C = beta*K_shaft, beta = {d['beta_s']:.3e} s")
+    lines.append(f"  damping       : {d['damping']}")
     return "\n".join(lines)
 
 

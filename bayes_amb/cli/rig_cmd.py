@@ -41,11 +41,10 @@ def run_from_ross(args: argparse.Namespace) -> int:
     write_text_atomic(args.output, rig_to_toml(conv.data))
     r = conv.rig
     d = {"output": args.output, "rig": conv.data, "notes": list(conv.notes)}
-    text = [f"wrote {args.output}: rig '{r.name}', {r.n_nodes} nodes, shaft "
-            f"{r.shaft.diameter * 1e3:g} mm x {r.shaft.length:g} m, {len(r.discs)} discs, "
-            f"bearings at nodes {r.bearing_nodes['A']} and {r.bearing_nodes['B']} (ki "
-            f"{r.ki:g} N/A, ks {r.ks:g} N/m), sensors at {r.sensor_nodes['A']} and "
-            f"{r.sensor_nodes['B']}, {r.nominal_speed_rpm:g} rpm"]
+    text = [f"wrote {args.output}: rig '{r.name}', {r.n_nodes} nodes, {r.shaft.text()}, "
+            f"{len(r.discs)} discs, bearings at nodes {r.bearing_nodes['A']} and "
+            f"{r.bearing_nodes['B']} ({r.magnet_text()}), sensors at {r.sensor_nodes['A']} "
+            f"and {r.sensor_nodes['B']}, {r.nominal_speed_rpm:g} rpm"]
     text += [f"  note: {n}" for n in conv.notes]
     emit(d, "\n".join(text), args.json)
     return 0

@@ -133,10 +133,9 @@ class GenericController:
 
 def bearing_mass_shares(rig: Rig) -> dict[str, float]:
     """Rigid rotor mass carried by each bearing (lever rule about the bearing axes), kg."""
-    s = rig.shaft
-    z = s.node_z
+    z = rig.shaft.node_z
     zA, zB = z[rig.bearing_nodes["A"] - 1], z[rig.bearing_nodes["B"] - 1]
-    items = [(s.density * s.area * s.length, s.length / 2.0)]
+    items = rig.shaft.mass_items()
     items += [(d.mass, z[d.node - 1]) for d in rig.discs]
     span = zB - zA
     mA = sum(m * (zB - zi) for m, zi in items) / span
@@ -146,16 +145,17 @@ def bearing_mass_shares(rig: Rig) -> dict[str, float]:
 
 def pid_gains(rig: Rig, settings: PIDSettings) -> dict[str, PIDGains]:
     """Continuous gains per channel (Ax, Ay, Bx, By) from the physical targets."""
-    k_net = settings.net_stiffness_ratio * rig.ks
-    kp = (rig.ks + k_net) / rig.ki
     shares = bearing_mass_shares(rig)
     out = {}
     for ch in CHANNELS:
+        mag = rig.magnets[ch[0]]
+        k_net = settings.net_stiffness_ratio * mag.ks
+        kp = (mag.ks + k_net) / mag.ki
         m_b = shares[ch[0]]
         if not m_b > 0:
             raise ControllerError(f"rig {rig.name}: bearing {ch[0]} carries a non-positive "
                                   f"rigid mass share ({m_b:g} kg); cannot design its PID")
-        kd = 2.0 * settings.damping_ratio * np.sqrt(k_net * m_b) / rig.ki
+        kd = 2.0 * settings.damping_ratio * np.sqrt(k_net * m_b) / mag.ki
         out[ch] = PIDGains(kp=kp, kI=kp * 2 * np.pi * settings.integral_hz, kd=kd,
                            w_I=2 * np.pi * settings.integrator_leak_hz,
                            w_d=2 * np.pi * settings.derivative_rolloff_hz)

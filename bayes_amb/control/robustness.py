@@ -91,12 +91,20 @@ def unstable_where(Ap: NDArray, Bp: NDArray, Cp: NDArray, K: tuple[NDArray, ...]
                    A_cont: NDArray, dt: float) -> str:
     """Where a discrete loop is unstable, in words: the frequency of its least stable pole
     and, when the continuous plant ``A_cont`` has a lightly damped mode near it, that mode
-    (the usual cause: a bending mode the controller's phase destabilises)."""
+    (the usual cause: a bending mode the controller's phase destabilises). A pole below the
+    plant's unstable rigid-body poles means the controller does not hold the rotor up."""
     z = np.linalg.eigvals(closed_loop_matrix(Ap, Bp, Cp, *K))
     worst = z[np.argmax(np.abs(z))]
     f = abs(np.angle(worst)) / (2 * np.pi * dt)
     text = f"least stable closed-loop pole at {f:.0f} Hz (|z| = {abs(worst):.6g})"
     lam = np.linalg.eigvals(A_cont)
+    low = lam[np.argsort(np.abs(lam))][:8]                # the suspended rigid body
+    rigid = low[low.real > 1e-3 * np.abs(low)]
+    if rigid.size and f <= np.abs(rigid).max() / (2 * np.pi):
+        return text + (", at the magnets' unstable rigid-body poles (up to "
+                       f"{np.abs(rigid).max() / (2 * np.pi):.0f} Hz): the controller does not "
+                       "hold the rotor up, its stiffness ki C(0) being short of the magnets' "
+                       "negative stiffness ks, or its phase wrong there")
     lam = lam[(lam.imag > 0) & (np.abs(lam) > 0)]
     if f > 0 and lam.size:
         fo = np.abs(lam.imag) / (2 * np.pi)

@@ -221,7 +221,8 @@ def _bearing_values(names: tuple[str, ...], theta: NDArray, rec: Recording
         for kind, unit in (("k", "N/m"), ("c", "N s/m")):
             n = f"{kind}_{ch}"
             th = theta[:, names.index(n)] if n in names else np.zeros(theta.shape[0])
-            val = rig.ks * (1.0 - th) if kind == "k" else th * rig.c_ref
+            val = (rig.magnets[ch[0]].ks * (1.0 - th) if kind == "k"
+                   else th * rig.c_ref)
             label = f"bearing {ch}: ks" if kind == "k" else f"bearing {ch}: c"
             out[label] = (val, unit, n in names)
     for n in names:

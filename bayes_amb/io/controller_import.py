@@ -26,6 +26,7 @@ radius < 1) and reports the peak sensitivities and the ISO 14839-3 zone.
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -45,8 +46,8 @@ from bayes_amb.io.controller_file import (
 from bayes_amb.io.daq import file_sha256
 from bayes_amb.rig import CHANNELS, Rig, load_rig
 
-__all__ = ["DISCRETISATION_METHODS", "ControllerImport", "import_controller",
-           "read_controller_mat"]
+__all__ = ["DISCRETISATION_METHODS", "ControllerImport", "checked_controller",
+           "diagonal_state_space", "import_controller", "read_controller_mat"]
 
 DISCRETISATION_METHODS = ("tustin", "zoh")
 TS_RTOL = 1e-9
@@ -151,24 +152,37 @@ def read_controller_mat(path: str | os.PathLike[str]
                 raise DataImportError(f"{where}: variable {name}: expected shape {shape}, got "
                                       f"{m.shape}")
         return (A, B.reshape(n, k), C.reshape(k, n), D), float(ts.flat[0]), "state space"
+    tfs = {ch: (_real(v, f"num_{ch}", where).ravel(), _real(v, f"den_{ch}", where).ravel())
+           for ch in CHANNELS}
+    return diagonal_state_space(tfs, where, "variable "), float(ts.flat[0]), \
+        "transfer functions"
+
+
+def diagonal_state_space(tfs: dict[str, tuple[NDArray, NDArray]], where: str,
+                         field: str = "") -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """(A, B, C, D) of a decentralised controller: one SISO transfer function (num, den;
+    descending powers) per channel Ax, Ay, Bx, By, from that channel's displacement to its
+    current. Raises DataImportError naming the channel of an improper or empty one."""
     blocks = []
     for ch in CHANNELS:
-        num, den = _real(v, f"num_{ch}", where).ravel(), _real(v, f"den_{ch}", where).ravel()
+        num, den = (np.asarray(c, dtype=float).ravel() for c in tfs[ch])
         den = np.trim_zeros(den, "f")
         if den.size == 0:
-            raise DataImportError(f"{where}: variable den_{ch}: all zero")
+            raise DataImportError(f"{where}: {field}den_{ch}: all zero")
         if np.trim_zeros(num, "f").size > den.size:
-            raise DataImportError(f"{where}: variable num_{ch}: improper transfer function "
+            raise DataImportError(f"{where}: {field}num_{ch}: improper transfer function "
                                   f"(numerator degree {np.trim_zeros(num, 'f').size - 1} > "
                                   f"denominator degree {den.size - 1})")
-        blocks.append(sig.tf2ss(num, den))
+        with warnings.catch_warnings():            # tf2ss's BadCoefficients on leading 0s
+            warnings.simplefilter("ignore")
+            blocks.append(sig.tf2ss(num, den))
+    k = len(CHANNELS)
     A = sla.block_diag(*(b[0] for b in blocks))
     B = sla.block_diag(*(b[1] for b in blocks))
     C = sla.block_diag(*(b[2] for b in blocks))
     D = np.diag([float(np.asarray(b[3]).ravel()[0]) for b in blocks])
     n = A.shape[0]
-    return ((A.reshape(n, n), B.reshape(n, k), C.reshape(k, n), D), float(ts.flat[0]),
-            "transfer functions")
+    return A.reshape(n, n), B.reshape(n, k), C.reshape(k, n), D
 
 
 def _discretise(K: tuple[NDArray, ...], dt: float, method: str, prewarp_hz: float | None,
@@ -194,7 +208,9 @@ def _discretise(K: tuple[NDArray, ...], dt: float, method: str, prewarp_hz: floa
         text = f"tustin (bilinear) prewarped at {prewarp_hz:g} Hz, dt = {dt!r} s"
     if not A.size:
         return (A, B, C, D), text
-    Ad, Bd, Cd, Dd, _ = sig.cont2discrete((A, B, C, D), T, method="bilinear")
+    with warnings.catch_warnings():       # no raw LinAlgWarning reaches the user: the
+        warnings.simplefilter("ignore")   # stability check below judges the result
+        Ad, Bd, Cd, Dd, _ = sig.cont2discrete((A, B, C, D), T, method="bilinear")
     return tuple(np.asarray(m) for m in (Ad, Bd, Cd, Dd)), text
 
 
@@ -249,6 +265,29 @@ def import_controller(source: str | os.PathLike[str], rig: Rig | str | None = No
         A missing or malformed variable, a Ts that disagrees with dt, or a controller that
         does not stabilise the rig (the spectral radius is named).
     """
+    p = Path(source)
+    where = f"controller {p}"
+    if feedback not in ("negative", "positive"):
+        raise DataImportError(f"{where}: option feedback: expected 'negative' or 'positive', "
+                              f"got {short_repr(feedback)}")
+    K, ts, form = read_controller_mat(p)
+    return checked_controller(K, ts, form, where, rig, dt=dt, method=method,
+                              prewarp_hz=prewarp_hz, feedback=feedback, speed_rpm=speed_rpm,
+                              source={"imported_from": str(p),
+                                      "source_sha256": file_sha256(p)},
+                              source_name=str(p))
+
+
+def checked_controller(K: tuple[NDArray, NDArray, NDArray, NDArray], ts: float, form: str,
+                       where: str, rig: Rig | str | None = None, *, dt: float | None = None,
+                       method: str = "tustin", prewarp_hz: float | None = None,
+                       feedback: str = "negative", speed_rpm: float | None = None,
+                       source: dict[str, Any] | None = None, source_name: str = "",
+                       hint: str = "") -> ControllerImport:
+    """A controller (A, B, C, D) from displacements Ax..By (m) to currents (A), sample time
+    ``ts`` (0: continuous), discretised at ``dt`` and checked on the rig's full FE plant, as
+    a generic controller file (the shared end of every import: :func:`import_controller`,
+    bayes_amb.io.ross_controller). ``hint`` is added to the refusal of an unstable loop."""
     from bayes_amb.control.robustness import (
         full_plant_discrete,
         loop_spectral_radius,
@@ -256,12 +295,6 @@ def import_controller(source: str | os.PathLike[str], rig: Rig | str | None = No
     )
     from bayes_amb.rotor import full_model
 
-    p = Path(source)
-    where = f"controller {p}"
-    if feedback not in ("negative", "positive"):
-        raise DataImportError(f"{where}: option feedback: expected 'negative' or 'positive', "
-                              f"got {short_repr(feedback)}")
-    K, ts, form = read_controller_mat(p)
     if ts == 0:
         if dt is None or not (np.isfinite(dt) and dt > 0):
             raise DataImportError(f"{where}: variable Ts: 0 (continuous) needs a sample time "
@@ -284,21 +317,22 @@ def import_controller(source: str | os.PathLike[str], rig: Rig | str | None = No
                               f"{fm.speed_rpm:g} rpm: closed-loop spectral radius {rho:.6g} "
                               f"(>= 1) on the {fm.A.shape[0]}-state plant, with feedback = "
                               f"'{feedback}' and {how}; "
-                              + unstable_where(Ap, Bp, fm.C, (A, B, C, D), fm.A, float(dt)))
+                              + unstable_where(Ap, Bp, fm.C, (A, B, C, D), fm.A, float(dt))
+                              + hint)
     sens = _modal_sensitivity(Ap, Bp, fm.C, (A, B, C, D), float(dt))
     n, k = A.shape[0], len(CHANNELS)
     Bk = np.hstack([B, np.zeros((n, k))])
     Ck = np.vstack([C, np.zeros((k, n))])
     Dk = np.block([[D, np.eye(k)], [np.zeros((k, k)), np.zeros((k, k))]])
     design: dict[str, Any] = {
-        "kind": "generic", "imported_from": str(p), "source_sha256": file_sha256(p),
+        "kind": "generic", **(source or {}),
         "form": form, "feedback": feedback, "discretisation": how,
         "check": {"speed_rpm": fm.speed_rpm, "spectral_radius_full": rho,
                   "sensitivity_peak_db": sens.peak_db, "iso14839_zone": sens.zone}}
     ctrl = ControllerFile(dt=float(dt), A=A, B=Bk, C=Ck, D=Dk, inputs=CONTROLLER_INPUTS,
                           outputs=CONTROLLER_OUTPUTS, design=design,
                           rig="reference" if rig_obj.source == "reference" else rig_obj.to_dict(),
-                          kind="generic", source=str(p))
+                          kind="generic", source=source_name)
     return ControllerImport(controller=ctrl, form=form, discretisation=how,
                             spectral_radius=rho, sensitivity_peak_db=sens.peak_db,
                             zone=sens.zone, speed_rpm=fm.speed_rpm)

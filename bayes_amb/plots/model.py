@@ -11,7 +11,7 @@ import math
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
-from matplotlib.patches import Rectangle
+from matplotlib.patches import Polygon, Rectangle
 
 from bayes_amb.plots.style import new_axes, styled
 from bayes_amb.reduction.fidelity import SingularValueData
@@ -111,9 +111,17 @@ def plot_rotor_sketch(rig: Rig, ax: Axes | None = None) -> Figure:
     s = rig.shaft
     mm = 1e3
     z = np.asarray(s.node_z) * mm
-    L, R = s.length * mm, 0.5 * s.diameter * mm
-    ax.add_patch(Rectangle((0.0, -R), L, 2 * R, facecolor="#c9ced6", edgecolor="k", lw=1.0,
-                           zorder=2, label=f"shaft, Ø{s.diameter * mm:.0f} mm"))
+    L, R = s.length * mm, 0.5 * s.max_diameter * mm
+    if s.uniform:
+        ax.add_patch(Rectangle((0.0, -R), L, 2 * R, facecolor="#c9ced6", edgecolor="k",
+                               lw=1.0, zorder=2, label=f"shaft, Ø{s.diameter * mm:.0f} mm"))
+    else:                       # each element as it is: stepped, tapered (outer contour)
+        for j, e in enumerate(s.elements):
+            z0, z1 = z[j], z[j + 1]
+            r0, r1 = 0.5 * e.od[0] * mm, 0.5 * e.od[1] * mm
+            ax.add_patch(Polygon([(z0, -r0), (z1, -r1), (z1, r1), (z0, r0)], closed=True,
+                                 facecolor="#c9ced6", edgecolor="k", lw=0.6, zorder=2,
+                                 label="shaft (elements)" if j == 0 else None))
     ax.plot(z, np.zeros_like(z), "o", color="k", ms=2.5, zorder=4,
             label=f"{s.n_nodes} FE nodes")
     for n in sorted({1, s.n_nodes, *range(5, s.n_nodes, 5)}):
@@ -121,7 +129,7 @@ def plot_rotor_sketch(rig: Rig, ax: Axes | None = None) -> Figure:
                     ha="center", va="bottom", fontsize=7.5, color="0.2", zorder=6)
     r_max = R
     for d in rig.discs:
-        dia, width = (v * mm for v in _disc_size(d.mass, d.ip, d.id, s.diameter))
+        dia, width = (v * mm for v in _disc_size(d.mass, d.ip, d.id, s.max_diameter))
         zc = z[d.node - 1]
         ax.add_patch(Rectangle((zc - width / 2, -dia / 2), width, dia, facecolor="#7f95b5",
                                edgecolor="k", lw=1.0, zorder=3, alpha=0.9))

@@ -145,7 +145,7 @@ def model_section(run: RunData, d: dv.Derived, opts: ReportOptions) -> Section:
     return _section("model", paragraphs=[
         f"Rig '{rig.name}' ({rig.description}) at the recording's speed of "
         f"{fm.speed_rpm:.0f} rpm: {rig.n_nodes} FE nodes, {fm.n_states} states; AMB "
-        f"ki = {rig.ki:g} N/A, ks = {rig.ks:g} N/m. These figures are derived from the rig "
+        f"{rig.magnet_text()}. These figures are derived from the rig "
         "embedded in the recording; they are model properties, not estimates.",
         f"Open-loop flexible modes: {', '.join(f'{f:.0f}' for f in bend)} Hz. The AMB "
         f"negative stiffness puts {len(poles)} poles in the right half-plane (Table below): "

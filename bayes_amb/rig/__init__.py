@@ -3,15 +3,18 @@
 from bayes_amb.rig.rig import (
     CHANNELS,
     Disc,
+    Magnet,
     Rig,
-    Shaft,
     check_rig_matches,
     check_speed_rpm,
     load_rig,
+    magnet_constants,
     node_label,
     rig_difference,
     rig_from_dict,
 )
+from bayes_amb.rig.shaft import Material, Shaft, ShaftSection, SteppedShaft
 
-__all__ = ["CHANNELS", "Disc", "Rig", "Shaft", "check_rig_matches", "check_speed_rpm",
-           "load_rig", "node_label", "rig_difference", "rig_from_dict"]
+__all__ = ["CHANNELS", "Disc", "Magnet", "Material", "Rig", "Shaft", "ShaftSection",
+           "SteppedShaft", "check_rig_matches", "check_speed_rpm", "load_rig",
+           "magnet_constants", "node_label", "rig_difference", "rig_from_dict"]

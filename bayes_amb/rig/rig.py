@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import RigError
+from bayes_amb.rig.shaft import Shaft, SteppedShaft, stepped_shaft_from_dict
 from bayes_amb.tomlfile import read_toml
 
 CHANNELS: tuple[str, ...] = ("Ax", "Ay", "Bx", "By")
@@ -33,37 +34,6 @@ def node_label(label: str) -> int | None:
 
 
 @dataclass(frozen=True)
-class Shaft:
-    """Uniform solid shaft, Euler-Bernoulli elements.
-
-    Attributes are SI: youngs_modulus in Pa, density in kg/m^3, diameter and length in m.
-    """
-
-    youngs_modulus: float
-    density: float
-    poisson: float
-    diameter: float
-    length: float
-    n_nodes: int
-
-    @property
-    def area(self) -> float:
-        """Cross-section area, m^2."""
-        return math.pi * self.diameter**2 / 4.0
-
-    @property
-    def second_moment(self) -> float:
-        """Second moment of area I, m^4."""
-        return math.pi * self.diameter**4 / 64.0
-
-    @property
-    def node_z(self) -> list[float]:
-        """Axial node positions, m, node 1 at z = 0."""
-        h = self.length / (self.n_nodes - 1)
-        return [i * h for i in range(self.n_nodes)]
-
-
-@dataclass(frozen=True)
 class Disc:
     """Rigid disc at a node: mass in kg, polar ip and diametral id inertia in kg m^2."""
 
@@ -72,6 +42,42 @@ class Disc:
     mass: float
     ip: float
     id: float
+
+
+MU0 = 4e-7 * math.pi
+"""Permeability of free space, H/m."""
+MAGNET_KEYS = {"gap": "nominal air gap g0 (m)", "bias_current": "bias current i0 (A)",
+               "pole_area": "pole face area (m^2)", "turns": "turns per coil",
+               "pole_angle": "angle of a pole to the bearing's axis (rad)"}
+"""The constants of a radial AMB magnet from which ki and ks follow (:func:`magnet_constants`)."""
+
+
+def magnet_constants(gap: float, bias_current: float, pole_area: float, turns: float,
+                     pole_angle: float = math.pi / 8) -> tuple[float, float]:
+    """(ki N/A, ks N/m) of a differential pair of electromagnets on one axis, linearised
+    about the centre (Schweitzer & Maslen, Magnetic Bearings, 2009, ch. 3 and p. 343).
+
+    Each magnet pulls with F = k (i0 +- i)^2 / (g0 -+ x)^2, k = mu0 n^2 A cos(alpha) / 4;
+    the pair's force is ki i + ks x with ki = 4 k i0 / g0^2 and ks = 4 k i0^2 / g0^3 (ks > 0:
+    a negative stiffness, as the rest of the chain takes it).
+
+    >>> ki, ks = magnet_constants(4.32e-4, 1.0, 4.703e-4, 138, 0.392)
+    >>> round(ki, 4), round(ks, 1)
+    (55.7335, 129012.8)
+    """
+    k = MU0 * turns**2 * pole_area * math.cos(pole_angle) / 4.0
+    return 4.0 * k * bias_current / gap**2, 4.0 * k * bias_current**2 / gap**3
+
+
+@dataclass(frozen=True)
+class Magnet:
+    """One radial AMB's linear constants, the same on its x and y axes: ki in N/A and ks in
+    N/m (f = ki i + ks s; ks > 0 destabilises). ``constants`` holds the magnet's gap, bias
+    current, pole area, turns and pole angle when ki and ks were computed from them."""
+
+    ki: float
+    ks: float
+    constants: tuple[tuple[str, float], ...] = ()
 
 
 @dataclass(frozen=True)
@@ -84,10 +90,9 @@ class Rig:
 
     name: str
     description: str
-    shaft: Shaft
+    shaft: Shaft | SteppedShaft
     discs: tuple[Disc, ...]
-    ki: float
-    ks: float
+    magnets: dict[str, Magnet]
     bearing_nodes: dict[str, int]
     sensor_nodes: dict[str, int]
     first_mode_zeta: float
@@ -102,6 +107,36 @@ class Rig:
     @property
     def n_nodes(self) -> int:
         return self.shaft.n_nodes
+
+    @property
+    def ki(self) -> float:
+        """The bearings' common ki (N/A); RigError when each bearing has its own (then use
+        ``magnets[name].ki``)."""
+        return self._shared("ki")
+
+    @property
+    def ks(self) -> float:
+        """The bearings' common ks (N/m); RigError when each bearing has its own (then use
+        ``magnets[name].ks``)."""
+        return self._shared("ks")
+
+    def magnet_text(self) -> str:
+        """The bearings' ki and ks in words: 'ki = 250 N/A, ks = 1e+06 N/m' when they share
+        them, else per bearing."""
+        mags = self.magnets
+        if len({(m.ki, m.ks) for m in mags.values()}) == 1:
+            m = next(iter(mags.values()))
+            return f"ki = {m.ki:g} N/A, ks = {m.ks:g} N/m"
+        return "; ".join(f"{b}: ki = {m.ki:.4g} N/A, ks = {m.ks:.4g} N/m"
+                         for b, m in mags.items())
+
+    def _shared(self, key: str) -> float:
+        vals = {b: getattr(m, key) for b, m in self.magnets.items()}
+        first = next(iter(vals.values()))
+        if any(v != first for v in vals.values()):
+            raise RigError(f"rig {self.source}: each bearing has its own {key} ({vals}); "
+                           f"take it per bearing (rig.magnets[name].{key})")
+        return first
 
     def shaft_node(self, label: str) -> int | None:
         """The node j of a shaft-node label 'n<j>' (1-based, checked against the shaft);
@@ -121,17 +156,13 @@ class Rig:
 
     def to_dict(self) -> dict[str, Any]:
         """The rig as a plain dict in rig-file form (for embedding in JSON sidecars)."""
-        s = self.shaft
         return {
             "name": self.name,
             "description": self.description,
-            "shaft": {"youngs_modulus": s.youngs_modulus, "density": s.density,
-                      "poisson": s.poisson, "diameter": s.diameter, "length": s.length,
-                      "n_nodes": s.n_nodes},
+            "shaft": self.shaft.to_dict(),
             "discs": [{"name": d.name, "node": d.node, "mass": d.mass, "ip": d.ip,
                        "id": d.id} for d in self.discs],
-            "bearings": {"ki": self.ki, "ks": self.ks,
-                         **{k: {"node": v} for k, v in self.bearing_nodes.items()}},
+            "bearings": self._bearings_dict(),
             "sensors": {k: {"node": v} for k, v in self.sensor_nodes.items()},
             "damping": {"first_mode_zeta": self.first_mode_zeta},
             "operation": {"nominal_speed_rpm": self.nominal_speed_rpm},
@@ -139,8 +170,25 @@ class Rig:
             **({"limits": dict(self.limits)} if self.limits else {}),
         }
 
+    def _bearings_dict(self) -> dict[str, Any]:
+        """[bearings] as a rig file has it: one ki and ks for both when they share them
+        (the shorthand), else per bearing (its magnet's constants where it was given so)."""
+        mags = self.magnets
+        shared = (all(not m.constants for m in mags.values())
+                  and len({(m.ki, m.ks) for m in mags.values()}) == 1)
+        if shared:
+            m = next(iter(mags.values()))
+            return {"ki": m.ki, "ks": m.ks,
+                    **{k: {"node": v} for k, v in self.bearing_nodes.items()}}
+        out: dict[str, Any] = {}
+        for b, node in self.bearing_nodes.items():
+            m = mags[b]
+            out[b] = ({"node": node, "magnet": dict(m.constants)} if m.constants
+                      else {"node": node, "ki": m.ki, "ks": m.ks})
+        return out
 
-SHIPPED_RIGS = ("reference", "small_rotor")
+
+SHIPPED_RIGS = ("reference", "small_rotor", "ross_test_rig")
 """Rig files shipped in bayes_amb/rig/data/, loadable by name."""
 _TOP_KEYS = {"name", "description", "shaft", "discs", "bearings", "sensors", "damping",
              "operation", "uncertainty", "limits"}
@@ -206,18 +254,24 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     name = data.get("name", Path(source).stem)
     if not isinstance(name, str) or not name:
         raise r.fail("name", f"expected a non-empty string, got {name!r}")
-    sh = r.table(data, "shaft", "shaft", _SHAFT_KEYS)
-    n_nodes = sh.get("n_nodes")
-    if isinstance(n_nodes, bool) or not isinstance(n_nodes, int) or n_nodes < 2:
-        raise r.fail("shaft.n_nodes", f"expected an integer >= 2, got {n_nodes!r}")
-    shaft = Shaft(
-        youngs_modulus=r.number(sh, "youngs_modulus", "shaft.youngs_modulus"),
-        density=r.number(sh, "density", "shaft.density"),
-        poisson=r.number(sh, "poisson", "shaft.poisson", nonneg=True, upper=0.5),
-        diameter=r.number(sh, "diameter", "shaft.diameter"),
-        length=r.number(sh, "length", "shaft.length"),
-        n_nodes=n_nodes,
-    )
+    sh = r.table(data, "shaft", "shaft")
+    shaft: Shaft | SteppedShaft
+    if "elements" in sh:
+        shaft = stepped_shaft_from_dict(sh, r)
+    else:
+        sh = r.table(data, "shaft", "shaft", _SHAFT_KEYS)
+        n_nodes = sh.get("n_nodes")
+        if isinstance(n_nodes, bool) or not isinstance(n_nodes, int) or n_nodes < 2:
+            raise r.fail("shaft.n_nodes", f"expected an integer >= 2, got {n_nodes!r}")
+        shaft = Shaft(
+            youngs_modulus=r.number(sh, "youngs_modulus", "shaft.youngs_modulus"),
+            density=r.number(sh, "density", "shaft.density"),
+            poisson=r.number(sh, "poisson", "shaft.poisson", nonneg=True, upper=0.5),
+            diameter=r.number(sh, "diameter", "shaft.diameter"),
+            length=r.number(sh, "length", "shaft.length"),
+            n_nodes=n_nodes,
+        )
+    n_nodes = shaft.n_nodes
     discs_raw = data.get("discs", [])
     if not isinstance(discs_raw, list):
         raise r.fail("discs", f"expected an array of tables, got {discs_raw!r}")
@@ -242,20 +296,24 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     if len({d.name for d in discs}) != len(discs):
         raise r.fail("discs", "disc names must be unique")
     bt = r.table(data, "bearings", "bearings", {"ki", "ks", "A", "B"})
-    ki = r.number(bt, "ki", "bearings.ki")
-    ks = r.number(bt, "ks", "bearings.ks", nonneg=True)
     bearing_nodes = {}
     sensor_nodes = {}
+    magnets = {}
     st = r.table(data, "sensors", "sensors", {"A", "B"})
     for b in ("A", "B"):
-        bearing_nodes[b] = r.node(r.table(bt, b, f"bearings.{b}", {"node"}), "node",
-                                  f"bearings.{b}.node", n_nodes)
+        tb = r.table(bt, b, f"bearings.{b}", {"node", "ki", "ks", "magnet"})
+        bearing_nodes[b] = r.node(tb, "node", f"bearings.{b}.node", n_nodes)
+        magnets[b] = _magnet(r, bt, tb, b)
         sensor_nodes[b] = r.node(r.table(st, b, f"sensors.{b}", {"node"}), "node",
                                  f"sensors.{b}.node", n_nodes)
     if bearing_nodes["A"] == bearing_nodes["B"]:
         raise r.fail("bearings.B.node", f"bearings A and B share node {bearing_nodes['A']}")
-    dt_ = r.table(data, "damping", "damping", {"first_mode_zeta"})
-    zeta = r.number(dt_, "first_mode_zeta", "damping.first_mode_zeta", nonneg=True, upper=1.0)
+    if isinstance(shaft, SteppedShaft) and "damping" not in data:
+        zeta = 0.0                     # the elements' own Rayleigh damping, nothing added
+    else:
+        dt_ = r.table(data, "damping", "damping", {"first_mode_zeta"})
+        zeta = r.number(dt_, "first_mode_zeta", "damping.first_mode_zeta", nonneg=True,
+                        upper=1.0)
     op = r.table(data, "operation", "operation", {"nominal_speed_rpm"})
     speed = r.number(op, "nominal_speed_rpm", "operation.nominal_speed_rpm", nonneg=True)
     un = data.get("uncertainty", {"c_ref": 1000.0, "k_ref": 1.0e5})
@@ -270,10 +328,28 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     desc = data.get("description", "")
     if not isinstance(desc, str):
         raise r.fail("description", f"expected a string, got {desc!r}")
-    return Rig(name=name, description=desc, shaft=shaft, discs=tuple(discs), ki=ki, ks=ks,
+    return Rig(name=name, description=desc, shaft=shaft, discs=tuple(discs), magnets=magnets,
                bearing_nodes=bearing_nodes, sensor_nodes=sensor_nodes, first_mode_zeta=zeta,
                nominal_speed_rpm=speed, c_ref=c_ref, k_ref=k_ref, source=source,
                limits=limits)
+
+
+def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:
+    """Bearing b's ki and ks: its own (ki, ks, or a magnet table), else the [bearings]
+    table's shared ki and ks."""
+    f = f"bearings.{b}"
+    if "magnet" in tb:
+        if "ki" in tb or "ks" in tb:
+            raise r.fail(f"{f}.magnet", "give ki and ks or the magnet's constants, not both")
+        mt = r.table(tb, "magnet", f"{f}.magnet", set(MAGNET_KEYS))
+        vals = {k: r.number(mt, k, f"{f}.magnet.{k}", nonneg=k == "pole_angle",
+                            upper=math.pi / 2 if k == "pole_angle" else None)
+                for k in MAGNET_KEYS if k != "pole_angle" or k in mt}
+        ki, ks = magnet_constants(**vals)
+        return Magnet(ki=ki, ks=ks, constants=tuple(vals.items()))
+    src, where = (tb, f) if ("ki" in tb or "ks" in tb) else (bt, "bearings")
+    return Magnet(ki=r.number(src, "ki", f"{where}.ki"),
+                  ks=r.number(src, "ks", f"{where}.ks", nonneg=True))
 
 
 LIMIT_KEYS = {"current_a": "the largest control current the amplifiers deliver, |u| (A)",

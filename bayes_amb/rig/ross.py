@@ -2,29 +2,29 @@
 
 What maps, one to one (ROSS nodes are 0-based, rig nodes 1-based):
 
-- ``ShaftElement`` -> ``[shaft]``: the rig has a uniform solid shaft, so every element must
-  have the same length, zero inner diameter, the same outer diameter at both ends and the
-  same material (E, rho, Poisson). Shear deformation is not modelled (Euler-Bernoulli with
-  rotary inertia and gyroscopics); a ROSS shaft with ``shear_effects=True`` is converted
-  and the conversion notes it.
-- ``DiskElement`` -> ``[[discs]]`` (m, Ip, Id), named D1, D2, ... in node order.
-- two ``MagneticBearingElement`` -> ``[bearings]``: ki, and ks = -ROSS ks (ROSS writes the
-  negative stiffness with its sign; the rig file the magnitude, f = ki i + ks s); both
-  bearings must share ki and ks. Each bearing's ``sensor_node`` gives ``[sensors]``.
+- ``ShaftElement`` -> ``[shaft]``. A shaft of equal, solid, Euler-Bernoulli elements of one
+  material with no mass-proportional damping becomes the uniform shorthand (its
+  stiffness-proportional ``beta`` -> ``[damping] first_mode_zeta = beta w1 / 2``, w1 the bare
+  shaft's first free-free bending frequency, rotor.assembly). Any other shaft becomes the
+  element table ``[[shaft.elements]]``: each element's length, outer and inner diameter at
+  both ends, material and Rayleigh damping (alpha, beta) as ROSS has them, and Timoshenko
+  shear (``[shaft] shear``) where ROSS has ``shear_effects=True``.
+- ``DiskElement`` -> ``[[discs]]`` (m, Ip, Id): D1 and D2 the two heaviest (the planes the
+  diagnosis tries first), then D3, D4, ... in node order; ``PointMass`` -> a disc without
+  inertia, named P1, P2, ...
+- two ``MagneticBearingElement`` -> ``[bearings] A, B``, each its own magnet: gap g0, bias
+  current i0, pole area ag, turns nw and pole angle alpha, from which ki and ks follow
+  (rig.magnet_constants; ROSS writes ks with its sign, the rig the magnitude). Each
+  bearing's ``sensor_node`` gives ``[sensors]``.
 - ``rated_w`` (rad/s), when set, gives ``nominal_speed_rpm``.
-- the shaft's stiffness-proportional material damping ``beta`` (ROSS: C = alpha M + beta K
-  per element) -> ``[damping] first_mode_zeta``: the rig's damping is C = beta K_shaft with
-  beta = 2 zeta / w1 (w1 the bare shaft's first free-free bending frequency,
-  rotor.assembly), so zeta = beta w1 / 2 carries ROSS's beta exactly. An explicit
-  ``first_mode_zeta`` (``--zeta``) replaces it, and the conversion notes that.
 
-Refused with one line naming the element and field (the rig would silently differ):
-mass-proportional damping (``alpha`` != 0), ``beta`` varying along the shaft, an axial
-force or torque on a shaft element, ``rotary_inertia=False`` or ``gyroscopic=False`` (the
-rig always has both), point masses. ROSS's own bearing controller (PID gains, transfer
-function) is not part of a rig and is noted; seals and other bearings are refused (above);
-axial/torsional DOFs are not modelled. The controller is designed or imported separately
-(``bayes-amb controller``, ``bayes-amb import-controller``).
+Refused with one line naming the element and field (the rig would silently differ): an
+axial force or torque on a shaft element, ``rotary_inertia=False`` or ``gyroscopic=False``
+(the rig always has both), Timoshenko on some elements and not others, a point mass with
+mx != my, damping set on the whole rotor (ROSS's global or modal damping), bearings or seals
+other than the two magnetic bearings. ROSS's own bearing controller (PID gains, transfer
+function) is not part of a rig and is noted: the controller is designed or imported
+separately (``bayes-amb controller``, ``bayes-amb import-controller``).
 """
 
 from __future__ import annotations
@@ -42,11 +42,13 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import RigError
-from bayes_amb.rig.rig import Rig, rig_from_dict
+from bayes_amb.rig.rig import Rig, magnet_constants, rig_from_dict
 
 __all__ = ["RossConversion", "rig_from_ross", "rig_to_toml"]
 
 _RTOL = 1e-9
+MAGNET_ATTRS = ("g0", "i0", "ag", "nw")
+"""The attributes that make a ROSS bearing a magnetic one (with ``alpha``, the pole angle)."""
 
 
 @dataclass(frozen=True)
@@ -71,14 +73,15 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
     Parameters
     ----------
     rotor : ross.Rotor
-        The rotor (uniform solid shaft, discs, two magnetic bearings).
+        The rotor: shaft elements, discs and point masses, two magnetic bearings. A live
+        object (the notebook path) or one loaded by :func:`load_ross_rotor`.
     name, source : str
         Rig name; where the rotor came from (for messages).
     nominal_speed_rpm : float, optional
         Default: the rotor's ``rated_w`` in rpm; required if that is not set.
     first_mode_zeta : float, optional
-        Default: from the ROSS shaft's ``beta`` (zeta = beta w1 / 2, module docstring);
-        a value given replaces it (noted).
+        A uniform shaft's damping, default from its elements' ``beta``. Given, it replaces
+        the ROSS shaft's own damping (every element's alpha and beta; noted).
     c_ref, k_ref : float
         Rig values ROSS does not hold (parameter scales).
 
@@ -95,118 +98,196 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
     shafts = sorted(rotor.shaft_elements, key=lambda e: e.n)
     if not shafts:
         raise fail("shaft_elements", "none")
-    notes = []
-    for key, label in (("L", "length"), ("odl", "outer diameter (left)"),
-                       ("odr", "outer diameter (right)")):
-        vals = [float(getattr(e, key)) for e in shafts]
-        if not _same(vals):
-            i = next(i for i, v in enumerate(vals) if not math.isclose(v, vals[0], rel_tol=_RTOL))
-            raise fail(f"shaft element {shafts[i].n}", f"{label} {vals[i]!r} differs from "
-                       f"element {shafts[0].n}'s {vals[0]!r} (a rig has a uniform shaft of "
-                       "equal elements)")
-    if not math.isclose(float(shafts[0].odl), float(shafts[0].odr), rel_tol=_RTOL):
-        raise fail(f"shaft element {shafts[0].n}", "tapered (odl != odr); a rig has a "
-                   "uniform shaft")
+    notes: list[str] = []
+    _refuse_unmapped(shafts, rotor, fail)
+    uniform = _is_uniform(shafts)
+    speed = nominal_speed_rpm
+    if speed is None:
+        rated = getattr(rotor, "rated_w", None)
+        if rated is None:
+            raise fail("rated_w", "not set; give nominal_speed_rpm (--speed-rpm)")
+        speed = float(rated) * 60.0 / (2.0 * math.pi)
+    discs = _discs(rotor, fail)
+    mbs = [b for b in rotor.bearing_elements if all(hasattr(b, k) for k in MAGNET_ATTRS)]
+    others = [b for b in rotor.bearing_elements if b not in mbs]
+    if len(mbs) != 2 or others:
+        raise fail("bearing_elements", f"expected exactly 2 MagneticBearingElement, got "
+                   f"{len(mbs)} (and {len(others)} other bearings or seals, which a rig does "
+                   "not hold yet)")
+    mbs.sort(key=lambda b: b.n)
+    bearings = {"A": _magnet_entry(mbs[0], fail), "B": _magnet_entry(mbs[1], fail)}
+    if any(getattr(b, "n_link", None) is not None for b in mbs):
+        notes.append("bearing links to support nodes (n_link) are ignored: rigid ground")
+    if any(getattr(b, "kp_pid", None) or getattr(b, "kd_pid", None)
+           or getattr(b, "controller_transfer_function_num", None) is not None for b in mbs):
+        notes.append("the ROSS bearings' controller (kp_pid, kd_pid, transfer function, "
+                     "k_amp, k_sense) is not part of a rig: design one (bayes-amb controller) "
+                     "or import the real one (bayes-amb import-controller)")
+    if any(hasattr(b, "kxx") and not (getattr(b, "kp_pid", 0) or getattr(b, "kd_pid", 0)
+                                      or getattr(b, "ki_pid", 0)) for b in mbs):
+        notes.append("the saved ROSS file holds the bearings' controller only as "
+                     "frequency-dependent stiffness and damping (kxx, cxx), not the "
+                     "controller itself: import the real one (bayes-amb import-controller)")
+    sensors = {k: {"node": int(getattr(b, "sensor_node", None) or b.n) + 1}
+               for k, b in zip(("A", "B"), mbs, strict=True)}
+    data: dict[str, Any] = {"name": name,
+                            "description": f"converted from ROSS rotor {Path(source).name}"}
+    if uniform:
+        shaft, zeta = _uniform_shaft(shafts, first_mode_zeta, notes)
+        data |= {"shaft": shaft, "discs": discs, "bearings": bearings, "sensors": sensors,
+                 "damping": {"first_mode_zeta": 0.0}}
+        if zeta is None:          # from beta: w1 of the bare shaft the rig will build
+            zeta = _zeta_of_beta(float(shafts[0].beta or 0.0), _rig(data, speed, c_ref,
+                                                                      k_ref, source))
+            if zeta == 0.0:
+                notes.append("the ROSS shaft has no material damping (beta = 0): "
+                             "first_mode_zeta = 0, undamped bending modes, which a "
+                             "controller check can fail on (give --zeta, e.g. 0.005 for "
+                             "steel)")
+        data["damping"] = {"first_mode_zeta": zeta}
+    else:
+        data |= {"shaft": _element_table(shafts, first_mode_zeta is not None),
+                 "discs": discs, "bearings": bearings, "sensors": sensors}
+        if first_mode_zeta is not None:
+            data["damping"] = {"first_mode_zeta": float(first_mode_zeta)}
+            notes.append(f"first_mode_zeta {first_mode_zeta:g} given replaces the ROSS "
+                         "shaft elements' own damping (alpha, beta)")
+    rig = _rig(data, speed, c_ref, k_ref, source)
+    return RossConversion(rig=rig, data=rig.to_dict(), notes=tuple(notes))
+
+
+def _rig(data: dict[str, Any], speed: float, c_ref: float, k_ref: float, source: str
+         ) -> Rig:
+    full = {**data, "operation": {"nominal_speed_rpm": float(speed)},
+            "uncertainty": {"c_ref": float(c_ref), "k_ref": float(k_ref)}}
+    return rig_from_dict(full, source=source)
+
+
+def _refuse_unmapped(shafts: list[Any], rotor: Any, fail: Any) -> None:
+    """Raise on what a rig cannot hold (module docstring)."""
     for e in shafts:
-        if float(e.idl) != 0.0 or float(e.idr) != 0.0:
-            raise fail(f"shaft element {e.n}", f"hollow (inner diameter {float(e.idl)!r}); a "
-                       "rig has a solid shaft")
-    mats = [(float(e.material.E), float(e.material.rho), float(e.material.Poisson))
-            for e in shafts]
-    for k, label in enumerate(("E", "rho", "Poisson")):
-        if not _same([m[k] for m in mats]):
-            raise fail("shaft_elements", f"material {label} varies along the shaft")
-    for e in shafts:
-        for attr, label in (("alpha", "mass-proportional damping alpha"),
-                            ("axial_force", "axial force"), ("torque", "torque")):
+        for attr, label in (("axial_force", "axial force"), ("torque", "torque")):
             v = float(getattr(e, attr, 0.0) or 0.0)
             if v != 0.0:
                 raise fail(f"shaft element {e.n}", f"{label} {v!r} has no rig equivalent (a "
-                           "rig holds stiffness-proportional damping beta only, and no "
-                           "axial load)" if attr == "alpha" else f"{label} {v!r} has no rig "
-                           "equivalent (a rig has no axial load or torque stiffening)")
+                           "rig has no axial load or torque stiffening)")
         for attr in ("rotary_inertia", "gyroscopic"):
             if getattr(e, attr, True) is False:
                 raise fail(f"shaft element {e.n}", f"{attr}=False; a rig always models "
                            "rotary inertia and gyroscopics (build the ROSS rotor with "
                            f"{attr}=True)")
-    betas = [float(getattr(e, "beta", 0.0) or 0.0) for e in shafts]
-    if not _same(betas) and not all(b == 0.0 for b in betas):
-        i = next(i for i, v in enumerate(betas) if not math.isclose(v, betas[0],
-                                                                     rel_tol=_RTOL))
-        raise fail(f"shaft element {shafts[i].n}", f"damping beta {betas[i]!r} differs from "
-                   f"element {shafts[0].n}'s {betas[0]!r} (a rig has one material damping)")
-    points = list(getattr(rotor, "point_mass_elements", None) or [])
-    if points:
-        raise fail(f"point mass at node {points[0].n}", f"{len(points)} point mass "
-                   "element(s); a rig has no point masses (model them as discs)")
-    if any(getattr(e, "shear_effects", False) for e in shafts):
-        notes.append("shear deformation (ROSS shear_effects=True) is not modelled: "
-                     "Euler-Bernoulli beams with rotary inertia")
-    n_nodes = len(shafts) + 1
+    shear = [bool(getattr(e, "shear_effects", False)) for e in shafts]
+    if any(shear) and not all(shear):
+        i = shear.index(not shear[0])
+        raise fail(f"shaft element {shafts[i].n}", f"shear_effects={shear[i]} differs from "
+                   f"element {shafts[0].n}'s {shear[0]} (a rig is Timoshenko or "
+                   "Euler-Bernoulli throughout)")
+    params = getattr(rotor, "parameters", None) or {}
+    for key in ("alpha", "beta", "default_damping_ratio"):
+        v = float(params.get(key, 0.0) or 0.0) if isinstance(params, dict) else 0.0
+        if v != 0.0:
+            raise fail(f"parameters.{key}", f"{v!r}: damping set on the whole rotor has no "
+                       "rig equivalent (give it per shaft element, alpha and beta)")
+    if getattr(rotor, "modal_damping_ratio", None) is not None:
+        raise fail("modal_damping_ratio", "modal damping of the whole rotor has no rig "
+                   "equivalent (give it per shaft element, alpha and beta)")
+
+
+def _is_uniform(shafts: list[Any]) -> bool:
+    """Equal solid Euler-Bernoulli elements of one material, no alpha: the shorthand."""
+    e0 = shafts[0]
+    return (_same([float(e.L) for e in shafts])
+            and _same([float(d) for e in shafts for d in (e.odl, e.odr)])
+            and all(float(e.idl) == 0.0 and float(e.idr) == 0.0 for e in shafts)
+            and not any(getattr(e, "shear_effects", False) for e in shafts)
+            and all(float(getattr(e, "alpha", 0.0) or 0.0) == 0.0 for e in shafts)
+            and _same([float(getattr(e, "beta", 0.0) or 0.0) for e in shafts])
+            and all(_material(e) == _material(e0) for e in shafts))
+
+
+def _material(e: Any) -> tuple[float, float, float]:
+    return (float(e.material.E), float(e.material.rho), float(e.material.Poisson))
+
+
+def _uniform_shaft(shafts: list[Any], zeta: float | None, notes: list[str]
+                   ) -> tuple[dict[str, Any], float | None]:
+    """The uniform shorthand of a uniform ROSS shaft, and the damping ratio if given."""
+    E, rho, nu = _material(shafts[0])
+    beta = float(getattr(shafts[0], "beta", 0.0) or 0.0)
+    if zeta is not None and beta != 0.0:
+        notes.append(f"first_mode_zeta {zeta:g} given replaces the ROSS shaft's damping "
+                     f"(beta {beta:g} s)")
+    return ({"youngs_modulus": E, "density": rho, "poisson": nu,
+             "diameter": float(shafts[0].odl),
+             "length": float(sum(float(e.L) for e in shafts)),
+             "n_nodes": len(shafts) + 1}, zeta)
+
+
+def _element_table(shafts: list[Any], drop_damping: bool) -> dict[str, Any]:
+    """[shaft] with materials and elements, as ROSS has them."""
+    names: dict[tuple[float, float, float], str] = {}
+    for e in shafts:
+        m = _material(e)
+        if m not in names:
+            base = str(getattr(e.material, "name", "") or "material").replace(" ", "_")
+            taken = set(names.values())
+            names[m] = base if base not in taken else f"{base}_{len(names) + 1}"
+    rows = []
+    for e in shafts:
+        row: dict[str, Any] = {"length": float(e.L),
+                               "od": [float(e.odl), float(e.odr)],
+                               "id": [float(e.idl), float(e.idr)],
+                               "material": names[_material(e)]}
+        if not drop_damping:
+            row["alpha"] = float(getattr(e, "alpha", 0.0) or 0.0)
+            row["beta"] = float(getattr(e, "beta", 0.0) or 0.0)
+        rows.append(row)
+    return {"shear": bool(getattr(shafts[0], "shear_effects", False)),
+            "materials": {n: {"youngs_modulus": m[0], "density": m[1], "poisson": m[2]}
+                          for m, n in names.items()},
+            "elements": rows}
+
+
+def _discs(rotor: Any, fail: Any) -> list[dict[str, Any]]:
+    """The discs, D1 and D2 the two heaviest (in node order: the planes the diagnosis
+    tries first for unbalance and cross-coupling, an impeller rather than a lamination
+    ring), then D3, D4, ... in node order; point masses P1, P2, ..."""
+    by_node = sorted(rotor.disk_elements, key=lambda d: (d.n, -float(d.m)))
+    heavy = sorted(sorted(by_node, key=lambda d: -float(d.m))[:2], key=lambda d: d.n)
+    ordered = heavy + [d for d in by_node if not any(d is h for h in heavy)]
     discs = [{"name": f"D{i + 1}", "node": int(d.n) + 1, "mass": float(d.m),
-              "ip": float(d.Ip), "id": float(d.Id)}
-             for i, d in enumerate(sorted(rotor.disk_elements, key=lambda d: d.n))]
-    mbs = [b for b in rotor.bearing_elements if hasattr(b, "ki") and hasattr(b, "ks")]
-    others = [b for b in rotor.bearing_elements if b not in mbs]
-    if len(mbs) != 2 or others:
-        raise fail("bearing_elements", f"expected exactly 2 MagneticBearingElement, got "
-                   f"{len(mbs)} (and {len(others)} other bearings or seals)")
-    mbs.sort(key=lambda b: b.n)
-    ki, ks = [float(b.ki) for b in mbs], [-float(b.ks) for b in mbs]
-    if not (_same(ki) and _same(ks)):
-        raise fail(f"bearing at node {mbs[1].n}", f"ki {ki[1]!r}, ks {-ks[1]!r} differ from "
-                   f"the bearing at node {mbs[0].n} (ki {ki[0]!r}, ks {-ks[0]!r}); a rig "
-                   "has one ki and ks")
-    if any(getattr(b, "n_link", None) is not None for b in mbs):
-        notes.append("bearing links to support nodes (n_link) are ignored: rigid ground")
-    speed = nominal_speed_rpm
-    if speed is None:
-        rated = getattr(rotor, "rated_w", None)
-        if rated is None:
-            raise fail("rated_w", "not set; give nominal_speed_rpm")
-        speed = float(rated) * 60.0 / (2.0 * math.pi)
-    m0 = mats[0]
-    beta = betas[0]
-    data = _rig_data(name, source, m0, shafts, n_nodes, discs, ki[0], ks[0], mbs, 0.0,
-                     speed, c_ref, k_ref)
-    zeta_ross = _zeta_of_beta(beta, rig_from_dict(data, source=source))
-    if first_mode_zeta is None:
-        first_mode_zeta = zeta_ross
-        if beta == 0.0:
-            notes.append("the ROSS shaft has no material damping (beta = 0): "
-                         "first_mode_zeta = 0, undamped bending modes, which a controller "
-                         "check can fail on (give --zeta, e.g. 0.005 for steel)")
-    elif not math.isclose(first_mode_zeta, zeta_ross, rel_tol=1e-6, abs_tol=1e-12):
-        notes.append(f"first_mode_zeta {first_mode_zeta:g} given replaces the ROSS shaft's "
-                     f"damping (beta {beta:g} s, i.e. first_mode_zeta {zeta_ross:.6g})")
-    if mbs and any(getattr(b, "kp_pid", None) for b in mbs):
-        notes.append("the ROSS bearings' controller (kp_pid, kd_pid, k_amp, k_sense) is not "
-                     "part of a rig: design one (bayes-amb controller) or import the real "
-                     "one (bayes-amb import-controller)")
-    data = _rig_data(name, source, m0, shafts, n_nodes, discs, ki[0], ks[0], mbs,
-                     float(first_mode_zeta), speed, c_ref, k_ref)
-    rig = rig_from_dict(data, source=source)
-    return RossConversion(rig=rig, data=data, notes=tuple(notes))
+              "ip": float(d.Ip), "id": float(d.Id)} for i, d in enumerate(ordered)]
+    points = sorted(getattr(rotor, "point_mass_elements", None) or [], key=lambda p: p.n)
+    for i, p in enumerate(points):
+        mx, my = float(getattr(p, "mx", 0.0)), float(getattr(p, "my", 0.0))
+        if not math.isclose(mx, my, rel_tol=_RTOL):
+            raise fail(f"point mass at node {p.n}", f"mx {mx!r} differs from my {my!r}; a "
+                       "rig's masses are the same in x and y")
+        if mx > 0:
+            discs.append({"name": f"P{i + 1}", "node": int(p.n) + 1, "mass": mx,
+                          "ip": 0.0, "id": 0.0})
+    return discs
 
 
-def _rig_data(name: str, source: str, m0: tuple[float, float, float], shafts: list[Any],
-              n_nodes: int, discs: list[dict[str, Any]], ki: float, ks: float, mbs: list[Any],
-              zeta: float, speed: float, c_ref: float, k_ref: float) -> dict[str, Any]:
-    """The rig-file dict of a converted rotor."""
-    return {"name": name,
-            "description": f"converted from ROSS rotor {Path(source).name}",
-            "shaft": {"youngs_modulus": m0[0], "density": m0[1], "poisson": m0[2],
-                      "diameter": float(shafts[0].odl),
-                      "length": float(sum(float(e.L) for e in shafts)), "n_nodes": n_nodes},
-            "discs": discs,
-            "bearings": {"ki": ki, "ks": ks, "A": {"node": int(mbs[0].n) + 1},
-                         "B": {"node": int(mbs[1].n) + 1}},
-            "sensors": {"A": {"node": int(getattr(mbs[0], "sensor_node", mbs[0].n)) + 1},
-                        "B": {"node": int(getattr(mbs[1], "sensor_node", mbs[1].n)) + 1}},
-            "damping": {"first_mode_zeta": zeta},
-            "operation": {"nominal_speed_rpm": float(speed)},
-            "uncertainty": {"c_ref": float(c_ref), "k_ref": float(k_ref)}}
+def _magnet_entry(b: Any, fail: Any) -> dict[str, Any]:
+    """[bearings] entry of a ROSS magnetic bearing: its node and its magnet's constants."""
+    i0 = b.i0
+    if isinstance(i0, (list, tuple)) or getattr(i0, "ndim", 0):
+        vals = [float(v) for v in (i0 if isinstance(i0, (list, tuple)) else i0.ravel())]
+        if not _same(vals):
+            raise fail(f"bearing at node {b.n}", f"bias current i0 {vals} differs between "
+                       "its axes; a rig's magnet is the same on x and y")
+        i0 = vals[0]
+    constants = {"gap": float(b.g0), "bias_current": float(i0), "pole_area": float(b.ag),
+                 "turns": float(b.nw),
+                 "pole_angle": float(getattr(b, "alpha", math.pi / 8))}
+    if hasattr(b, "ks") and hasattr(b, "ki"):          # a live element: ROSS's own values
+        ki, ks = magnet_constants(**constants)
+        if not (math.isclose(ki, float(b.ki), rel_tol=1e-9)
+                and math.isclose(ks, -float(b.ks), rel_tol=1e-9)):
+            raise fail(f"bearing at node {b.n}", f"ki {float(b.ki)!r}, ks {float(b.ks)!r} "
+                       f"are not those of its magnet's constants ({ki!r}, {-ks!r})")
+    return {"node": int(b.n) + 1, "magnet": constants}
 
 
 def _zeta_of_beta(beta: float, rig: Rig) -> float:
@@ -221,15 +302,30 @@ def _zeta_of_beta(beta: float, rig: Rig) -> float:
 
 
 def _value(v: Any) -> str:
+    """A TOML value: a string, bool, number, array or (nested) inline table."""
     if isinstance(v, str):
         return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
     if isinstance(v, bool):
         return "true" if v else "false"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_key(a)} = {_value(b)}" for a, b in v.items()) + " }"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
     return repr(v)
 
 
+def _key(k: str) -> str:
+    return k if k.replace("_", "").replace("-", "").isalnum() else _value(k)
+
+
+def _is_table_array(v: Any) -> bool:
+    return isinstance(v, list) and bool(v) and all(isinstance(x, dict) for x in v)
+
+
 def rig_to_toml(data: dict[str, Any]) -> str:
-    """Rig-file TOML text of a rig dict (the form of ``Rig.to_dict()``).
+    """Rig-file TOML text of a rig dict (the form of ``Rig.to_dict()``): top-level tables as
+    ``[key]``, arrays of tables as ``[[key]]`` (``[[shaft.elements]]`` inside a table), other
+    tables inline.
 
     Examples
     --------
@@ -239,19 +335,22 @@ def rig_to_toml(data: dict[str, Any]) -> str:
     >>> tomllib.loads(rig_to_toml(d)) == d
     True
     """
-    out = [f"{k} = {_value(v)}" for k, v in data.items() if not isinstance(v, (dict, list))]
+    out = [f"{_key(k)} = {_value(v)}" for k, v in data.items()
+           if not isinstance(v, dict) and not _is_table_array(v)]
     for key, v in data.items():
         if isinstance(v, dict):
-            out += ["", f"[{key}]"]
+            out += ["", f"[{_key(key)}]"]
+            out += [f"{_key(k2)} = {_value(v2)}" for k2, v2 in v.items()
+                    if not _is_table_array(v2)]
             for k2, v2 in v.items():
-                if isinstance(v2, dict):
-                    inner = ", ".join(f"{a} = {_value(b)}" for a, b in v2.items())
-                    out.append(f"{k2} = {{ {inner} }}")
-                else:
-                    out.append(f"{k2} = {_value(v2)}")
-        elif isinstance(v, list):
+                if _is_table_array(v2):
+                    for item in v2:
+                        out += ["", f"[[{_key(key)}.{_key(k2)}]]",
+                                *(f"{_key(a)} = {_value(b)}" for a, b in item.items())]
+        elif _is_table_array(v):
             for item in v:
-                out += ["", f"[[{key}]]", *(f"{a} = {_value(b)}" for a, b in item.items())]
+                out += ["", f"[[{_key(key)}]]",
+                        *(f"{_key(a)} = {_value(b)}" for a, b in item.items())]
     return "\n".join(out) + "\n"
 
 
@@ -296,36 +395,32 @@ def import_ross() -> Any:
 
 
 def load_ross_rotor(path: str | os.PathLike[str]) -> Any:
-    """``ross.Rotor.load(path)``, with one-line errors (RigError)."""
+    """``ross.Rotor.load(path)``, with one-line errors (RigError).
+
+    ROSS 3.1 saves a MagneticBearingElement but loads it as a plain BearingElement, without
+    its magnet or controller. The saved tables still hold them: each such bearing gets its
+    magnet's constants (g0, i0, ag, nw, alpha), its sensor node and its PID gains back as
+    attributes, read from the file; ROSS is not asked to rebuild the element (it refuses one
+    whose controller was a transfer function, which the file does not keep)."""
     p = Path(path)
     if not p.is_file():
         raise RigError(f"ROSS rotor {p}: field <file>: not found")
     ross = import_ross()
     try:
-        rotor = ross.Rotor.load(str(p))
+        with _silenced():
+            rotor = ross.Rotor.load(str(p))
         tables = tomllib.loads(p.read_text(encoding="utf-8"))
     except Exception as exc:  # ROSS raises many types on a malformed file
         raise RigError(f"ROSS rotor {p}: field <file>: not a readable ROSS rotor "
                        f"({type(exc).__name__}: {str(exc)[:100]})") from None
-    # ROSS 3.1 saves a MagneticBearingElement but loads it as a plain BearingElement:
-    # rebuild each one from its saved parameters to recover ki, ks and the sensor node
-    keys = ("g0", "i0", "ag", "nw", "alpha", "k_amp", "k_sense", "kp_pid", "kd_pid",
-            "ki_pid", "sensor_node")
+    keys = (*MAGNET_ATTRS, "alpha", "k_amp", "k_sense", "kp_pid", "kd_pid", "ki_pid",
+            "sensor_node")
     magnetic = {t.get("tag"): t for t in tables.values()
-                if isinstance(t, dict) and all(k in t for k in ("g0", "i0", "ag", "nw"))}
+                if isinstance(t, dict) and all(k in t for k in MAGNET_ATTRS)}
     for b in rotor.bearing_elements:
         t = magnetic.get(getattr(b, "tag", None))
-        if t is not None and not hasattr(b, "ki"):
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore")
-                    mb = ross.MagneticBearingElement(n=int(t["n"]),
-                                                     **{k: t[k] for k in keys if k in t})
-            except Exception as exc:  # as above: ROSS's own validation
-                raise RigError(f"ROSS rotor {p}: bearing {t.get('tag')!r}: not a valid "
-                               f"magnetic bearing ({type(exc).__name__}: {str(exc)[:100]})"
-                               ) from None
-            b.ki, b.ks, b.sensor_node = mb.ki, mb.ks, mb.sensor_node
-            for k in ("kp_pid", "kd_pid", "ki_pid", "k_amp", "k_sense"):
-                setattr(b, k, getattr(mb, k, None))
+        if t is not None and not hasattr(b, "g0"):
+            for k in keys:
+                if k in t:
+                    setattr(b, k, t[k])
     return rotor

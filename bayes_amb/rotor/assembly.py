@@ -19,7 +19,7 @@ import scipy.linalg as sla
 from numpy.typing import NDArray
 
 from bayes_amb.rig import CHANNELS, Rig
-from bayes_amb.rotor.elements import disc_matrices, shaft_element
+from bayes_amb.rotor.elements import disc_matrices, section_element, shaft_element
 
 _AXIS_OFFSET = {"x": 0, "y": 1, "tx": 2, "ty": 3}
 DOF_PER_NODE = 4
@@ -39,9 +39,11 @@ def channel_dofs(nodes: dict[str, int]) -> list[int]:
 class RotorMatrices:
     """Global second-order matrices, each (n_q, n_q) with n_q = 4 * n_nodes.
 
-    M in kg (kg m^2 on rotations), K_shaft in N/m, C in N s/m (C = beta*K_shaft),
-    G gyroscopic per rad/s of spin (multiply by Omega), K_bearing = -ks on bearing DOFs,
-    Bq (n_q, 4) maps currents to forces (ki), Cq (4, n_q) picks sensor displacements.
+    M in kg (kg m^2 on rotations), K_shaft in N/m, C in N s/m (C = beta*K_shaft on a
+    uniform shaft; the elements' Rayleigh damping alpha M_e + beta K_e plus beta*K_shaft on
+    a stepped one), G gyroscopic per rad/s of spin (multiply by Omega), K_bearing = -ks on
+    each bearing's DOFs, Bq (n_q, 4) maps currents to forces (each bearing's ki), Cq (4, n_q)
+    picks sensor displacements.
     """
 
     M: NDArray
@@ -69,19 +71,36 @@ class RotorMatrices:
 
 def shaft_matrices(rig: Rig) -> tuple[NDArray, NDArray, NDArray]:
     """Bare-shaft M, K and G (no discs, no bearings), each (4 n_nodes, 4 n_nodes)."""
+    M, K, G, _ = _shaft_with_damping(rig)
+    return M, K, G
+
+
+def _shaft_with_damping(rig: Rig) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """Bare-shaft M, K, G and the elements' own Rayleigh damping sum(alpha M_e + beta K_e)
+    (zero on a uniform shaft, whose damping is set by first_mode_zeta)."""
     s = rig.shaft
     n_q = DOF_PER_NODE * s.n_nodes
     M = np.zeros((n_q, n_q))
     K = np.zeros((n_q, n_q))
     G = np.zeros((n_q, n_q))
-    le = s.length / (s.n_nodes - 1)
-    Me, Ke, Ge = shaft_element(le, s.youngs_modulus, s.density, s.area, s.second_moment)
-    for e in range(s.n_nodes - 1):
-        idx = slice(DOF_PER_NODE * e, DOF_PER_NODE * (e + 2))
+    C = np.zeros((n_q, n_q))
+    if s.uniform:
+        le = s.length / (s.n_nodes - 1)
+        Me, Ke, Ge = shaft_element(le, s.youngs_modulus, s.density, s.area, s.second_moment)
+        elements = [(Me, Ke, Ge, 0.0, 0.0)] * (s.n_nodes - 1)
+    else:
+        elements = [(*section_element(e.length, e.od, e.id, e.material.youngs_modulus,
+                                      e.material.density, e.material.poisson,
+                                      shear=s.shear), e.alpha, e.beta)
+                    for e in s.elements]
+    for j, (Me, Ke, Ge, alpha, beta) in enumerate(elements):
+        idx = slice(DOF_PER_NODE * j, DOF_PER_NODE * (j + 2))
         M[idx, idx] += Me
         K[idx, idx] += Ke
         G[idx, idx] += Ge
-    return M, K, G
+        if alpha or beta:
+            C[idx, idx] += alpha * Me + beta * Ke
+    return M, K, G, C
 
 
 def first_free_free_bending(M: NDArray, K: NDArray) -> float:
@@ -103,9 +122,10 @@ def assemble(rig: Rig) -> RotorMatrices:
     >>> m.n_q
     160
     """
-    M, K, G = shaft_matrices(rig)
-    beta = 2.0 * rig.first_mode_zeta / first_free_free_bending(M, K)
-    C = beta * K
+    M, K, G, C_el = _shaft_with_damping(rig)
+    beta = (2.0 * rig.first_mode_zeta / first_free_free_bending(M, K)
+            if rig.first_mode_zeta else 0.0)
+    C = beta * K if rig.shaft.uniform else beta * K + C_el
     for d in rig.discs:
         Md, Gd = disc_matrices(d.mass, d.ip, d.id)
         idx = slice(dof_index(d.node, "x"), dof_index(d.node, "x") + DOF_PER_NODE)
@@ -114,11 +134,11 @@ def assemble(rig: Rig) -> RotorMatrices:
     n_q = M.shape[0]
     K_b = np.zeros((n_q, n_q))
     b_dofs = channel_dofs(rig.bearing_nodes)
-    for j in b_dofs:
-        K_b[j, j] -= rig.ks
+    for ch, j in zip(CHANNELS, b_dofs, strict=True):
+        K_b[j, j] -= rig.magnets[ch[0]].ks
     Bq = np.zeros((n_q, len(CHANNELS)))
-    for k, j in enumerate(b_dofs):
-        Bq[j, k] = rig.ki
+    for k, (ch, j) in enumerate(zip(CHANNELS, b_dofs, strict=True)):
+        Bq[j, k] = rig.magnets[ch[0]].ki
     Cq = np.zeros((len(CHANNELS), n_q))
     for k, j in enumerate(channel_dofs(rig.sensor_nodes)):
         Cq[k, j] = 1.0

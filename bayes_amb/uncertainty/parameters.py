@@ -51,8 +51,8 @@ class ParameterSpec:
 
     def physical_scale(self, rig: Rig) -> float:
         """Physical value per unit theta (N/m or N s/m)."""
-        if self.kind == "k":
-            return -rig.ks
+        if self.kind == "k":        # theta is the relative change of this bearing's ks
+            return -rig.magnets[self.location].ks
         if self.kind in ("c", "cd"):
             return rig.c_ref
         return rig.k_ref
@@ -157,7 +157,7 @@ def physical_change(spec: ParameterSpec, rig: Rig, theta: float,
     node = node_of(spec, rig)
     if spec.kind == "k":
         j = dof_index(node, spec.axis)
-        dK[j, j] = theta * rig.ks          # K_bearing = -(1 - theta) ks = -ks + theta ks
+        dK[j, j] = theta * rig.magnets[spec.location].ks   # K_b = -(1 - theta) ks
     elif spec.kind == "c":
         j = dof_index(node, spec.axis)
         dC[j, j] = theta * rig.c_ref
@@ -185,7 +185,7 @@ def lft_columns(spec: ParameterSpec, rig: Rig, mats: RotorMatrices) -> tuple[NDA
     cols, rows = [], []
     if spec.kind in ("k", "c"):
         j = dof_index(node, spec.axis)
-        value = rig.ks if spec.kind == "k" else rig.c_ref
+        value = rig.magnets[spec.location].ks if spec.kind == "k" else rig.c_ref
         col = np.zeros(2 * n_q)
         col[n_q:] = -Mi[:, j] * value
         row = np.zeros(2 * n_q)

@@ -8,6 +8,7 @@ import numpy as np
 
 from bayes_amb.discrepancy.library.base import Candidate, EffectEntry, Quantity, Sampled
 from bayes_amb.inference.priors import Prior
+from bayes_amb.rig import CHANNELS
 
 
 @dataclass(frozen=True)
@@ -41,7 +42,8 @@ class ResidualFlexibility(Candidate):
         return A2, B2, C2
 
     def physical(self, draws, ctx):
-        D = ctx.static_residual / ctx.rig.ki
+        ki = np.array([ctx.rig.magnets[ch[0]].ki for ch in CHANNELS])
+        D = ctx.static_residual / ki[None, :]          # per A of each bearing's current
         g = draws[:, 0]
         return {"scale": (g, "-"),
                 "compliance_A": (g * 0.5 * (D[0, 0] + D[1, 1]), "m/N"),
