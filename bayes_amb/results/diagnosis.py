@@ -377,6 +377,32 @@ class Diagnosis(Block):
         """The verdict and the plain-language paragraph."""
         return f"verdict: {self.verdict}\n{self.story}"
 
+    def _repr_html_(self) -> str:
+        """The notebook view: verdict, story, named effects, the bearing coefficients
+        before and after, and the key figure (where the mismatch is, when the residuals are
+        at hand; else the coefficients)."""
+        from bayes_amb.results.html import result_html
+
+        def coef(c: Coefficient | None) -> str:
+            if c is None:
+                return "-"
+            lo, hi = c.physical_hdi90
+            return f"{c.physical_mean:.4g} [{lo:.4g}, {hi:.4g}]"
+
+        names = list(self.parameters_before) or list(self.parameters_after)
+        rows = [[n, coef(self.parameters_before.get(n)), coef(self.parameters_after.get(n)),
+                 (self.parameters_before.get(n) or self.parameters_after[n]).unit]
+                for n in names]
+        effects = [[e.title, e.location, e.confidence, e.description]
+                   for e in self.explanations]
+        tables = ([(["effect named", "where", "confidence", "estimate"], effects)]
+                  if effects else [])
+        tables.append((["coefficient", "before (90 % HDI)", "after (90 % HDI)", "unit"], rows))
+        kind = "location" if self.residuals is not None else "parameters"
+        return result_html(f"Diagnosis of {self.recording}", f"verdict: {self.verdict}",
+                           [self.story, self.adequacy.line if self.adequacy else ""], tables,
+                           lambda: self.plot(kind))
+
     def plot(self, kind: str = "location") -> Figure:
         """A figure of plots/discrepancy.py: location, residuals, candidates, improvement
         or parameters (location and residuals need the residuals: a diagnosis just computed

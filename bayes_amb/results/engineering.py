@@ -66,6 +66,19 @@ class EngineeringAnswers(Block):
                          + ("" if q.estimated else "  (not estimated)")
                          for k, q in self.quantities.items())
 
+    def _repr_html_(self) -> str:
+        """The notebook view: one row per quantity (median, 90 % interval, nominal, unit) and
+        the first group's figure."""
+        from bayes_amb.results.html import result_html
+
+        rows = [[k, f"{q.value:.5g}", f"[{q.interval90[0]:.5g}, {q.interval90[1]:.5g}]",
+                 f"{q.nominal:.5g}", q.unit, "" if q.estimated else "not estimated"]
+                for k, q in self.quantities.items()]
+        return result_html(f"Engineering answers ({self.model} model, {self.n_draws} draws)",
+                           f"running speed {self.running_speed_rpm:g} rpm; {self.interval}",
+                           self.notes, [(["quantity", "median", "90 % interval", "nominal",
+                                          "unit", ""], rows)], self.plot)
+
     def plot(self, group: str | None = None) -> Figure:
         """The quantities of one group (default: the first) as intervals about their
         medians, the nominal value marked (plots/engineering.py)."""

@@ -220,6 +220,27 @@ class Identification(Block):
                          f"[{p.physical_hdi90[0]:.4g}, {p.physical_hdi90[1]:.4g}] {p.unit}")
         return "\n".join(lines)
 
+    def _repr_html_(self) -> str:
+        """The notebook view: inference and adequacy lines, one row per parameter (mean, sd,
+        90 % interval, physical), and the posterior's marginals when it was sampled."""
+        from bayes_amb.results.html import result_html
+
+        rows = [[n, f"{p.mean:+.4f}", f"{p.sd:.4f}", f"[{p.hdi90[0]:+.4f}, {p.hdi90[1]:+.4f}]",
+                 f"{p.physical_mean:.4g}",
+                 f"[{p.physical_hdi90[0]:.4g}, {p.physical_hdi90[1]:.4g}]", p.unit]
+                for n, p in self.parameters.items()]
+        lines = [self.adequacy.line if self.adequacy else "",
+                 f"start transient fitted ({self.start_transient.reason})"
+                 if self.start_transient is not None and self.start_transient.fitted else "",
+                 self.inference_note or ""]
+        title = (f"Identification of {self.recording}" if self.recording else
+                 f"Identification of {len(self.recordings or [])} records")
+        return result_html(title, f"{self.inference}; converged: {self.converged}", lines,
+                           [(["parameter", "mean", "sd", "90 % HDI", "physical",
+                              "physical 90 % HDI", "unit"], rows)],
+                           (lambda: self.plot("posterior")) if self.posterior is not None
+                           else None)
+
     def plot(self, kind: str = "posterior") -> Figure:
         """A figure of plots/posterior.py from the draws (after sampling): 'posterior'
         (marginals and pairs) or 'trace'."""

@@ -84,6 +84,21 @@ class RecordsDiagnosis(Block):
                   for a in self.across]
         return "\n".join(lines)
 
+    def _repr_html_(self) -> str:
+        """The notebook view: each record's verdict, and each effect across the records."""
+        from bayes_amb.results.html import result_html
+
+        recs = [[i, s, f"{r:g}" if r is not None else "-", v] for i, (s, r, v) in enumerate(
+            zip(self.recordings, self.speeds_rpm or [None] * len(self.recordings),
+                self.verdicts, strict=True), 1)]
+        across = [[a.effect, ", ".join(map(str, a.named_in)) or "no record alone",
+                   "yes" if a.named_jointly else "", "yes" if a.in_every_record else "",
+                   a.size.reading if a.size is not None else ""] for a in self.across]
+        return result_html(f"Diagnosis of {len(self.recordings)} records", "", [],
+                           [(["record", "recording", "speed (rpm)", "verdict"], recs),
+                            (["effect", "named in records", "named together",
+                              "in every record", "size across records"], across)])
+
     def save(self, out_dir: str | Path) -> Path:
         """OUT/record_<i>/ (each record's diagnosis files) and OUT/records.json, atomically
         (the page: report.records.write_records_report(OUT), as the CLI does)."""

@@ -78,6 +78,20 @@ class Study(Block):
                 if self.finished else f"study '{self.name}': not finished")
         return "\n".join([head, *(f"  - {c}" for c in self.conclusions or [])])
 
+    def _repr_html_(self) -> str:
+        """The notebook view: name, size and conclusions, the cells, and the SBC coverage
+        or benchmark figure when the study has one."""
+        from bayes_amb.results.html import result_html
+
+        rows = [[i + 1, ", ".join(f"{k}={v}" for k, v in c.items()
+                                  if not isinstance(v, (dict, list)))]
+                for i, c in enumerate(self.cells[:20])]
+        kind = "sbc_coverage" if self.sbc else "benchmark" if self.benchmark else None
+        head = self.summary().splitlines()
+        return result_html(f"Study '{self.name}'", head[0], [self.description, *head[1:]],
+                           [(["cell", "settings"], rows)],
+                           (lambda: self.plot(kind)) if kind else None)
+
     def plot(self, kind: str = "sbc_coverage") -> Figure:
         """A figure of plots/studies.py: sbc_ranks or sbc_coverage (studies that draw from
         the prior), or benchmark (the concealed-effect benchmark)."""
