@@ -26,6 +26,19 @@ def test_a_bending_mode_with_the_damping_of_a_lag_is_a_stand_in():
     assert "tentative" in stand_in_sentence([StandIn.from_dict(s) for s in found])
 
 
+def test_a_bending_mode_is_judged_against_the_rigs_own_damping():
+    """The real test rig's Rayleigh damping (beta 1e-4 s) gives its third bending pair a
+    damping ratio of 0.24 in the FE model: fitted there it is that mode, not a stand-in;
+    on a rig whose FE model gives it 0.005 the same interval is one."""
+    fitted = _effect("flexible_mode", "bending pair 3", damping_ratio=(0.227, 0.255))
+    own = {("flexible_mode", "bending pair 3"): {"damping_ratio": 0.238}}
+    assert stand_ins([fitted], own) == []
+    light = {("flexible_mode", "bending pair 3"): {"damping_ratio": 0.005}}
+    assert [s["plausible"] for s in stand_ins([fitted], light)] == [[0.0, 0.2]]
+    heavy = _effect("flexible_mode", "bending pair 3", damping_ratio=(0.75, 0.9))
+    assert [s["plausible"] for s in stand_ins([heavy], own)] == [[0.0, 3 * 0.238]]
+
+
 @pytest.mark.parametrize("hdi", [(0.0029, 0.0032), (0.15, 0.25), (0.19, 0.9)])
 def test_a_lightly_damped_mode_or_an_interval_reaching_into_the_range_is_not(hdi):
     assert stand_ins([_effect("flexible_mode", "bending pair 1", damping_ratio=hdi)]) == []

@@ -37,6 +37,7 @@ from bayes_amb.discrepancy.fitstats import (
     draws,
     effect_summaries,
     fit_quality,
+    nominal_physical,
     residual_spectrum,
     theta_summary,
 )
@@ -287,7 +288,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
     all_effects = effect_summaries(reported, s_fin)
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
-    substitutes = stand_ins(effects)
+    substitutes = stand_ins(effects, nominal_physical(reported))
     confidence = "tentative" if unexplained["present"] or substitutes else "confident"
     s_coef = (averaged(s_fin, s_nom, nominal.p) if confidence == "tentative" and sel.accepted
               else s_fin)

@@ -146,6 +146,18 @@ def effect_summaries(fitted: FittedModel, samples: NDArray) -> list[dict[str, An
     return out
 
 
+def nominal_physical(fitted: FittedModel) -> dict[tuple[str, str], dict[str, float]]:
+    """Per candidate (effect, location): its physical quantities with its sampled
+    parameters at zero, the rig's own model (a bending pair's FE frequency and damping)."""
+    fwd = fitted.forward
+    out = {}
+    for c, sl in zip(fwd.candidates, fwd.slices, strict=True):
+        width = len(fwd.params[sl])
+        phys = c.physical(np.zeros((1, width)), fwd.ctx)
+        out[(c.effect, c.location)] = {k: float(np.ravel(v)[0]) for k, (v, _) in phys.items()}
+    return out
+
+
 def predict(fitted: FittedModel) -> NDArray:
     """Time-domain eps_pred (N, 4) at the MAP: S(theta) x plus any synchronous lines."""
     fwd = fitted.forward

@@ -24,10 +24,14 @@ if TYPE_CHECKING:
     from bayes_amb.results.diagnosis import StandIn
 
 
-def stand_ins(effects: list[dict[str, Any]]) -> list[dict[str, Any]]:
+def stand_ins(effects: list[dict[str, Any]],
+              nominal: dict[tuple[str, str], dict[str, float]] | None = None
+              ) -> list[dict[str, Any]]:
     """The stand-ins among effect summaries (fitstats.effect_summaries): per effect and
     quantity whose 90 % interval lies wholly outside its plausible range, the effect,
-    location, quantity, interval, range, reason and one line."""
+    location, quantity, interval, range, reason and one line. ``nominal`` (fitstats.
+    nominal_physical): each effect's quantities in the rig's own model, which widen the
+    range of a ``Quantity.relative``."""
     out = []
     for e in effects:
         entry = REGISTRY.get(e["effect"])
@@ -38,6 +42,9 @@ def stand_ins(effects: list[dict[str, Any]]) -> list[dict[str, Any]]:
                 continue
             lo, hi = e["params"][q.name]["hdi90"]
             a, b = q.plausible
+            own = (nominal or {}).get((e["effect"], e["location"]), {}).get(q.name)
+            if q.relative is not None and own is not None:
+                b = max(b, q.relative * abs(own))
             if hi >= a and lo <= b:
                 continue
             unit = "" if q.unit == "-" else f" {q.unit}"

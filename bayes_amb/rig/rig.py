@@ -217,6 +217,16 @@ class _Reader:
                 raise self.fail(f"{field}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
         return t
 
+    def row(self, t: Any, field: str, allowed: set[str]) -> dict:
+        """An entry of an array of tables (or of a table of tables): a table of the allowed
+        keys."""
+        if not isinstance(t, dict):
+            raise self.fail(field, f"expected a table, got {t!r}")
+        extra = sorted(set(t) - allowed)
+        if extra:
+            raise self.fail(f"{field}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
+        return t
+
     def number(self, t: dict, key: str, field: str, *, positive: bool = True,
                nonneg: bool = False, upper: float | None = None) -> float:
         if key not in t:
@@ -278,11 +288,7 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     discs = []
     for i, d in enumerate(discs_raw):
         f = f"discs[{i}]"
-        if not isinstance(d, dict):
-            raise r.fail(f, f"expected a table, got {d!r}")
-        bad = sorted(set(d) - _DISC_KEYS)
-        if bad:
-            raise r.fail(f"{f}.{bad[0]}", f"unknown key (allowed: {sorted(_DISC_KEYS)})")
+        r.row(d, f, _DISC_KEYS)
         dname = d.get("name", f"D{i + 1}")
         if not isinstance(dname, str) or not dname:
             raise r.fail(f"{f}.name", f"expected a non-empty string, got {dname!r}")

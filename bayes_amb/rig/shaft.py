@@ -185,11 +185,7 @@ def stepped_shaft_from_dict(sh: dict[str, Any], r: Any) -> SteppedShaft:
     mats = {}
     for name, m in mats_raw.items():
         f = f"shaft.materials.{name}"
-        if not isinstance(m, dict):
-            raise r.fail(f, f"expected a table, got {m!r}")
-        extra = sorted(set(m) - MATERIAL_KEYS)
-        if extra:
-            raise r.fail(f"{f}.{extra[0]}", f"unknown key (allowed: {sorted(MATERIAL_KEYS)})")
+        r.row(m, f, MATERIAL_KEYS)
         mats[name] = Material(name, r.number(m, "youngs_modulus", f"{f}.youngs_modulus"),
                               r.number(m, "density", f"{f}.density"),
                               r.number(m, "poisson", f"{f}.poisson", nonneg=True, upper=0.5))
@@ -199,11 +195,7 @@ def stepped_shaft_from_dict(sh: dict[str, Any], r: Any) -> SteppedShaft:
     elements = []
     for i, e in enumerate(rows):
         f = f"shaft.elements[{i}]"
-        if not isinstance(e, dict):
-            raise r.fail(f, f"expected a table, got {e!r}")
-        extra = sorted(set(e) - ELEMENT_KEYS)
-        if extra:
-            raise r.fail(f"{f}.{extra[0]}", f"unknown key (allowed: {sorted(ELEMENT_KEYS)})")
+        r.row(e, f, ELEMENT_KEYS)
         mat = e.get("material", next(iter(mats)) if len(mats) == 1 else None)
         if mat not in mats:
             raise r.fail(f"{f}.material", f"expected one of {sorted(mats)}, got {mat!r}")

@@ -54,13 +54,16 @@ class Quantity:
     allows it to lie (``plausible``, (low, high), None where it does not say). An effect
     whose whole 90 % interval falls outside that range is a stand-in: it fits something the
     library lacks, and the diagnosis says so (discrepancy/stand_ins.py). ``why`` gives the
-    physics of the range in one clause."""
+    physics of the range in one clause. ``relative``: the range's top is at least this many
+    times the quantity's value in the rig's own model (its sampled parameters at zero): a
+    bending mode's damping is judged against the damping the rig's FE model gives it."""
 
     name: str
     unit: str
     meaning: str
     plausible: tuple[float, float] | None = None
     why: str = ""
+    relative: float | None = None
 
 
 @dataclass(frozen=True)

@@ -89,8 +89,10 @@ ENTRY = EffectEntry(
     physical=(Quantity("frequency_hz", "Hz", "backward-whirl bending frequency"),
               Quantity("forward_hz", "Hz", "forward-whirl bending frequency"),
               Quantity("damping_ratio", "-", "backward-whirl damping ratio",
-                       plausible=(0.0, 0.2),
-                       why="a shaft's bending mode is lightly damped (about 0.001-0.05); "
-                           "above 0.2 it has no resonance left to be called a mode")),
+                       plausible=(0.0, 0.2), relative=3.0,
+                       why="a shaft's bending mode is lightly damped (about 0.001-0.05, or "
+                           "what the rig's own material damping gives it); above 0.2, or 3 "
+                           "times the FE model's ratio where that is more, it is not this "
+                           "mode")),
     repeatable=True, make=_make)
 FlexibleMode.entry = ENTRY
