@@ -3,13 +3,14 @@
 #                 (python -m bayes_amb.warmup), run the end-to-end demo
 #   make test   - same set-up, then the default test suite (2 processes, pytest-xdist)
 #   make bench  - the benchmarks (ratios against a baseline run side by side)
+#   make docs   - the documentation site in site/ (mkdocs --strict; not part of make test)
 # BLAS threads: the tool limits them itself (bayes_amb/threads.py; BAYES_AMB_THREADS=N).
 SHELL := /bin/bash
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test bench lint clean venv
+.PHONY: demo test bench docs lint clean venv
 
 venv: $(STAMP)
 
@@ -34,8 +35,13 @@ test: $(STAMP)
 bench: $(STAMP)
 	$(VENV)/bin/bayes-amb bench
 
+docs: $(STAMP)
+	$(PY) -m pip install --quiet -e '.[docs]'
+	$(PY) tools/readme_to_index.py
+	$(VENV)/bin/mkdocs build --strict
+
 lint: $(STAMP)
 	$(PY) -m ruff check bayes_amb tests benchmarks studies
 
 clean:
-	rm -rf $(VENV) .pytest_cache build *.egg-info
+	rm -rf $(VENV) .pytest_cache build *.egg-info site docs/index.md
