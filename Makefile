@@ -38,7 +38,7 @@ bench: $(STAMP)
 docs: $(STAMP)
 	$(PY) -m pip install --quiet -e '.[docs]'
 	$(PY) tools/readme_to_index.py
-	$(VENV)/bin/mkdocs build --strict
+	JUPYTER_PATH=$(CURDIR)/tools/jupyter $(VENV)/bin/mkdocs build --strict
 
 lint: $(STAMP)
 	$(PY) -m ruff check bayes_amb tests benchmarks studies

@@ -47,7 +47,8 @@ def figure_img(make: Callable[[], Any], width_px: int = 720) -> str:
     finally:
         plt.close(fig)
     data = base64.b64encode(buf.getvalue()).decode("ascii")
-    return f'<img style="max-width:{width_px}px" src="data:image/png;base64,{data}"/>'
+    return (f'<img style="max-width:min(100%,{width_px}px)" '
+            f'src="data:image/png;base64,{data}"/>')
 
 
 def result_html(title: str, verdict: str = "", lines: Sequence[str] = (),

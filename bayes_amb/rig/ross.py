@@ -124,7 +124,8 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
                      "k_amp, k_sense) is not part of a rig: design one (bayes-amb controller) "
                      "or import the real one (bayes-amb import-controller)")
     if any(hasattr(b, "kxx") and not (getattr(b, "kp_pid", 0) or getattr(b, "kd_pid", 0)
-                                      or getattr(b, "ki_pid", 0)) for b in mbs):
+                                      or getattr(b, "ki_pid", 0))
+           and getattr(b, "controller_transfer_function_num", None) is None for b in mbs):
         notes.append("the saved ROSS file holds the bearings' controller only as "
                      "frequency-dependent stiffness and damping (kxx, cxx), not the "
                      "controller itself: import the real one (bayes-amb import-controller)")
