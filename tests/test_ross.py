@@ -215,3 +215,22 @@ def test_a_saved_rotors_pid_controllers_import_from_the_cli(tmp_path, capsys):
                             str(tmp_path / "c2.json")], capsys)
     assert code == 2 and err.count("\n") == 1
     assert "bearing A (ROSS node 12): no controller" in err and "only as kxx and cxx" in err
+
+
+def test_an_imported_transfer_function_is_realised_well_scaled():
+    """tf2ss's companion form of the real rig's 14th-order lead-lag and notch chain had
+    entries from 1e-5 to 1e25 and an eigenvector condition of 3e18; balanced, the same
+    controller (the same spectral radius) has a condition below 1e5, and the loop's noise
+    filters of a model that keeps bending pairs can be evaluated."""
+    amb_models = pytest.importorskip("ross.bearings.magnetic.amb_models")
+    from bayes_amb.io.ross_controller import controller_from_ross
+
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rotor = amb_models.rotor_example_amb_complex_controllers()
+    imp = controller_from_ross(rotor, load_rig("ross_test_rig"), dt=1e-4, speed_rpm=3000.0,
+                               scale={"A": 1 / 0.0062, "B": 1 / 0.0046})
+    A = imp.controller.A
+    assert np.linalg.cond(np.linalg.eig(A)[1]) < 1e5
+    assert np.abs(A).max() < 10 and np.abs(imp.controller.C).max() < 1e10
+    assert imp.spectral_radius == pytest.approx(0.99258514, abs=1e-7)

@@ -158,6 +158,27 @@ def read_controller_mat(path: str | os.PathLike[str]
         "transfer functions"
 
 
+def balanced_realisation(A: NDArray, B: NDArray, C: NDArray, D: NDArray
+                         ) -> tuple[NDArray, NDArray, NDArray, NDArray]:
+    """The same transfer function in a well-scaled realisation: a diagonal similarity that
+    balances A's rows and columns (scipy.linalg.matrix_balance, no permutation), then one
+    scale that gives B and C the same size. tf2ss's companion form of a high-order
+    controller (a lead-lag and notch chain with poles at 10^3-10^4 rad/s) has entries from
+    1e-5 to 1e25 and an eigenvector condition of 1e18; every later computation with it (the
+    discretisation, the loop's noise filters) loses what that costs."""
+    n = A.shape[0]
+    if n == 0:
+        return A, B, C, D
+    _, (scale, _) = sla.matrix_balance(A, permute=False, separate=True)
+    A = A * scale[None, :] / scale[:, None]
+    B, C = B / scale[:, None], C * scale[None, :]
+    b, c = np.linalg.norm(B), np.linalg.norm(C)
+    if b > 0 and c > 0:
+        a = np.sqrt(c / b)
+        B, C = B * a, C / a
+    return A, B, C, D
+
+
 def diagonal_state_space(tfs: dict[str, tuple[NDArray, NDArray]], where: str,
                          field: str = "") -> tuple[NDArray, NDArray, NDArray, NDArray]:
     """(A, B, C, D) of a decentralised controller: one SISO transfer function (num, den;
@@ -175,7 +196,7 @@ def diagonal_state_space(tfs: dict[str, tuple[NDArray, NDArray]], where: str,
                                   f"denominator degree {den.size - 1})")
         with warnings.catch_warnings():            # tf2ss's BadCoefficients on leading 0s
             warnings.simplefilter("ignore")
-            blocks.append(sig.tf2ss(num, den))
+            blocks.append(balanced_realisation(*sig.tf2ss(num, den)))
     k = len(CHANNELS)
     A = sla.block_diag(*(b[0] for b in blocks))
     B = sla.block_diag(*(b[1] for b in blocks))
