@@ -18,7 +18,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="also list the nominal model's own coefficients, tried first "
                         "(default: physics only)")
     p.add_argument("--markdown", action="store_true",
-                   help="print the README's Markdown table (default: plain text)")
+                   help="print the library's Markdown table, as docs/diagnose.md has it "
+                   "(default: plain text)")
     p.add_argument("--json", action="store_true", help="print JSON (default: text)")
     p.set_defaults(func=run)
 

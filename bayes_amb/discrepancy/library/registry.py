@@ -159,7 +159,7 @@ def library_table(with_nominal: bool = False) -> list[dict[str, Any]]:
 
 
 def markdown_table() -> str:
-    """The library as a Markdown table (README): effect, parameters (units), sampled
+    """The library as a Markdown table (docs/diagnose.md): effect, parameters (units), sampled
     parameters (priors), fingerprint, equivalences."""
     head = ("| effect | parameters (units) | sampled (prior, null) | fingerprint | "
             "cannot be told from |\n|---|---|---|---|---|")
