@@ -35,7 +35,6 @@ from bayes_amb.engineering.loop import closed_loop_modes
 from bayes_amb.engineering.quantities import draws_from
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.recording import Recording
-from bayes_amb.rig import CHANNELS
 from bayes_amb.threads import limited_threads
 
 __all__ = ["FrfEstimate", "FrfResult", "controller_response", "frequency_responses",
@@ -186,7 +185,7 @@ def frequency_responses(source: Any, recording: Recording, n_draws: int = 50,
                        recording.dt, nps)
     f = est.freq_hz
     K = controller_response(recording, f)
-    ki = np.array([recording.rig.magnets[ch[0]].ki for ch in CHANNELS])
+    ki = np.array([m.ki for m in recording.rig.channel_magnets])
     rig, ctrl, speed = recording.rig, recording.controller, recording.speed_rpm
 
     def responses(theta: dict[str, float]) -> tuple[NDArray, NDArray]:

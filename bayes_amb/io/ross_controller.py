@@ -34,6 +34,7 @@ from bayes_amb.io.controller_import import (
     diagonal_state_space,
 )
 from bayes_amb.rig import CHANNELS, Rig
+from bayes_amb.rig.ross import magnetic_bearings, pid_gains
 
 __all__ = ["ROSS_HINT", "controller_from_ross", "ross_bearing_controllers"]
 
@@ -69,8 +70,7 @@ def ross_bearing_controllers(rotor: Any, where: str = "ROSS rotor"
     """Per channel Ax, Ay, Bx, By: (num, den) of k_amp C(s) k_sense, from y (m) to i (A),
     negative feedback (module docstring). Bearing A is the magnetic bearing at the lower
     node, as in the converted rig (rig.ross)."""
-    mbs = sorted((b for b in rotor.bearing_elements
-                  if all(hasattr(b, k) for k in ("g0", "i0", "ag", "nw"))), key=lambda b: b.n)
+    mbs = magnetic_bearings(rotor)
     if len(mbs) != 2:
         raise DataImportError(f"{where}: bearing_elements: expected 2 magnetic bearings, got "
                               f"{len(mbs)}")
@@ -78,11 +78,11 @@ def ross_bearing_controllers(rotor: Any, where: str = "ROSS rotor"
     for name, b in zip(("A", "B"), mbs, strict=True):
         num = getattr(b, "controller_transfer_function_num", None)
         den = getattr(b, "controller_transfer_function_den", None)
-        gains = [float(getattr(b, k, 0.0) or 0.0) for k in ("kp_pid", "ki_pid", "kd_pid")]
+        gains = pid_gains(b)
         if num is not None and den is not None:
             cn, cd = _poly(num), _poly(den)
         elif any(gains):
-            cn, cd = _pid(gains[0], gains[1], gains[2], float(getattr(b, "n_f", 1e4)))
+            cn, cd = _pid(*gains, float(getattr(b, "n_f", 1e4)))
         else:
             raise DataImportError(
                 f"{where}: bearing {name} (ROSS node {b.n}): no controller (no PID gains, no "

@@ -120,6 +120,11 @@ class Rig:
         ``magnets[name].ks``)."""
         return self._shared("ks")
 
+    @property
+    def channel_magnets(self) -> tuple[Magnet, ...]:
+        """The magnet of each channel Ax, Ay, Bx, By (its bearing's)."""
+        return tuple(self.magnets[ch[0]] for ch in CHANNELS)
+
     def magnet_text(self) -> str:
         """The bearings' ki and ks in words: 'ki = 250 N/A, ks = 1e+06 N/m' when they share
         them, else per bearing."""
@@ -269,7 +274,7 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     if "elements" in sh:
         shaft = stepped_shaft_from_dict(sh, r)
     else:
-        sh = r.table(data, "shaft", "shaft", _SHAFT_KEYS)
+        r.row(sh, "shaft", _SHAFT_KEYS)
         n_nodes = sh.get("n_nodes")
         if isinstance(n_nodes, bool) or not isinstance(n_nodes, int) or n_nodes < 2:
             raise r.fail("shaft.n_nodes", f"expected an integer >= 2, got {n_nodes!r}")

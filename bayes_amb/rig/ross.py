@@ -44,11 +44,24 @@ from typing import Any
 from bayes_amb.errors import RigError
 from bayes_amb.rig.rig import Rig, magnet_constants, rig_from_dict
 
-__all__ = ["RossConversion", "rig_from_ross", "rig_to_toml"]
+__all__ = ["RossConversion", "magnetic_bearings", "pid_gains", "rig_from_ross", "rig_to_toml"]
 
 _RTOL = 1e-9
 MAGNET_ATTRS = ("g0", "i0", "ag", "nw")
 """The attributes that make a ROSS bearing a magnetic one (with ``alpha``, the pole angle)."""
+PID_ATTRS = ("kp_pid", "ki_pid", "kd_pid")
+
+
+def magnetic_bearings(rotor: Any) -> list[Any]:
+    """The rotor's magnetic bearings in node order: bearing A first, then B."""
+    return sorted((b for b in rotor.bearing_elements
+                   if all(hasattr(b, k) for k in MAGNET_ATTRS)), key=lambda b: b.n)
+
+
+def pid_gains(bearing: Any) -> tuple[float, float, float]:
+    """(Kp, Ki, Kd) of a ROSS magnetic bearing's PID controller (zeros: none)."""
+    kp, ki, kd = (float(getattr(bearing, k, 0.0) or 0.0) for k in PID_ATTRS)
+    return kp, ki, kd
 
 
 @dataclass(frozen=True)
@@ -108,24 +121,23 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
             raise fail("rated_w", "not set; give nominal_speed_rpm (--speed-rpm)")
         speed = float(rated) * 60.0 / (2.0 * math.pi)
     discs = _discs(rotor, fail)
-    mbs = [b for b in rotor.bearing_elements if all(hasattr(b, k) for k in MAGNET_ATTRS)]
+    mbs = magnetic_bearings(rotor)
     others = [b for b in rotor.bearing_elements if b not in mbs]
     if len(mbs) != 2 or others:
         raise fail("bearing_elements", f"expected exactly 2 MagneticBearingElement, got "
                    f"{len(mbs)} (and {len(others)} other bearings or seals, which a rig does "
                    "not hold yet)")
-    mbs.sort(key=lambda b: b.n)
     bearings = {"A": _magnet_entry(mbs[0], fail), "B": _magnet_entry(mbs[1], fail)}
     if any(getattr(b, "n_link", None) is not None for b in mbs):
         notes.append("bearing links to support nodes (n_link) are ignored: rigid ground")
-    if any(getattr(b, "kp_pid", None) or getattr(b, "kd_pid", None)
-           or getattr(b, "controller_transfer_function_num", None) is not None for b in mbs):
+    has_tf = [getattr(b, "controller_transfer_function_num", None) is not None for b in mbs]
+    has_pid = [any(pid_gains(b)) for b in mbs]
+    if any(has_tf) or any(has_pid):
         notes.append("the ROSS bearings' controller (kp_pid, kd_pid, transfer function, "
                      "k_amp, k_sense) is not part of a rig: design one (bayes-amb controller) "
                      "or import the real one (bayes-amb import-controller)")
-    if any(hasattr(b, "kxx") and not (getattr(b, "kp_pid", 0) or getattr(b, "kd_pid", 0)
-                                      or getattr(b, "ki_pid", 0))
-           and getattr(b, "controller_transfer_function_num", None) is None for b in mbs):
+    if any(hasattr(b, "kxx") and not tf and not pid
+           for b, tf, pid in zip(mbs, has_tf, has_pid, strict=True)):
         notes.append("the saved ROSS file holds the bearings' controller only as "
                      "frequency-dependent stiffness and damping (kxx, cxx), not the "
                      "controller itself: import the real one (bayes-amb import-controller)")
@@ -414,8 +426,7 @@ def load_ross_rotor(path: str | os.PathLike[str]) -> Any:
     except Exception as exc:  # ROSS raises many types on a malformed file
         raise RigError(f"ROSS rotor {p}: field <file>: not a readable ROSS rotor "
                        f"({type(exc).__name__}: {str(exc)[:100]})") from None
-    keys = (*MAGNET_ATTRS, "alpha", "k_amp", "k_sense", "kp_pid", "kd_pid", "ki_pid",
-            "sensor_node")
+    keys = (*MAGNET_ATTRS, "alpha", "k_amp", "k_sense", *PID_ATTRS, "sensor_node")
     magnetic = {t.get("tag"): t for t in tables.values()
                 if isinstance(t, dict) and all(k in t for k in MAGNET_ATTRS)}
     for b in rotor.bearing_elements:

@@ -125,7 +125,7 @@ def assemble(rig: Rig) -> RotorMatrices:
     M, K, G, C_el = _shaft_with_damping(rig)
     beta = (2.0 * rig.first_mode_zeta / first_free_free_bending(M, K)
             if rig.first_mode_zeta else 0.0)
-    C = beta * K if rig.shaft.uniform else beta * K + C_el
+    C = beta * K + C_el
     for d in rig.discs:
         Md, Gd = disc_matrices(d.mass, d.ip, d.id)
         idx = slice(dof_index(d.node, "x"), dof_index(d.node, "x") + DOF_PER_NODE)
@@ -134,11 +134,12 @@ def assemble(rig: Rig) -> RotorMatrices:
     n_q = M.shape[0]
     K_b = np.zeros((n_q, n_q))
     b_dofs = channel_dofs(rig.bearing_nodes)
-    for ch, j in zip(CHANNELS, b_dofs, strict=True):
-        K_b[j, j] -= rig.magnets[ch[0]].ks
+    mags = rig.channel_magnets
+    for m, j in zip(mags, b_dofs, strict=True):
+        K_b[j, j] -= m.ks
     Bq = np.zeros((n_q, len(CHANNELS)))
-    for k, (ch, j) in enumerate(zip(CHANNELS, b_dofs, strict=True)):
-        Bq[j, k] = rig.magnets[ch[0]].ki
+    for k, (m, j) in enumerate(zip(mags, b_dofs, strict=True)):
+        Bq[j, k] = m.ki
     Cq = np.zeros((len(CHANNELS), n_q))
     for k, j in enumerate(channel_dofs(rig.sensor_nodes)):
         Cq[k, j] = 1.0

@@ -73,14 +73,18 @@ def shaft_element(length: float, youngs_modulus: float, density: float, area: fl
     M = _both_planes(density * area * _beam_translational_mass(length)
                      + density * second_moment * P)
     K = _both_planes(youngs_modulus * second_moment * _beam_stiffness(length))
-    # Gyroscopic coupling from L = rho*J*Omega * int(theta_x' theta_y) dz, with
-    # theta_y = N' q_x and theta_x = -N' q_y (see module docstring), signs folded into q_y.
+    return M, K, _gyroscopic(2.0 * density * second_moment * P)
+
+
+def _gyroscopic(gp: NDArray) -> NDArray:
+    """The 8x8 gyroscopic matrix (per rad/s of spin) from the planar polar-inertia integral
+    gp = int rho J Psi^T Psi dz (J = 2 I). From L = rho*J*Omega * int(theta_x' theta_y) dz,
+    with theta_y = Psi q_x and theta_x = -Psi q_y (module docstring), signs folded into q_y."""
     G = np.zeros((8, 8))
-    gp = 2.0 * density * second_moment * P
     qy_as_slope = gp * _Y_SIGN[None, :]          # columns of q_y, expressed as slopes
     G[np.ix_(_X_DOFS, _Y_DOFS)] = qy_as_slope
     G[np.ix_(_Y_DOFS, _X_DOFS)] = -qy_as_slope.T
-    return M, K, G
+    return G
 
 
 def disc_matrices(mass: float, ip: float, id_: float) -> tuple[NDArray, NDArray]:
@@ -199,12 +203,7 @@ def section_element(length: float, od: tuple[float, float], id_: tuple[float, fl
         planar_m = planar_m + density * planar_r
     M = _both_planes(planar_m)
     K = _both_planes(planar_k)
-    G = np.zeros((8, 8))
-    if gyroscopic:
-        gp = 2.0 * density * planar_r
-        qy_as_slope = gp * _Y_SIGN[None, :]
-        G[np.ix_(_X_DOFS, _Y_DOFS)] = qy_as_slope
-        G[np.ix_(_Y_DOFS, _X_DOFS)] = -qy_as_slope.T
+    G = _gyroscopic(2.0 * density * planar_r) if gyroscopic else np.zeros((8, 8))
     return M, K, G
 
 

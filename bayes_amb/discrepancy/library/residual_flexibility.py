@@ -8,7 +8,6 @@ import numpy as np
 
 from bayes_amb.discrepancy.library.base import Candidate, EffectEntry, Quantity, Sampled
 from bayes_amb.inference.priors import Prior
-from bayes_amb.rig import CHANNELS
 
 
 @dataclass(frozen=True)
@@ -42,7 +41,7 @@ class ResidualFlexibility(Candidate):
         return A2, B2, C2
 
     def physical(self, draws, ctx):
-        ki = np.array([ctx.rig.magnets[ch[0]].ki for ch in CHANNELS])
+        ki = np.array([m.ki for m in ctx.rig.channel_magnets])
         D = ctx.static_residual / ki[None, :]          # per A of each bearing's current
         g = draws[:, 0]
         return {"scale": (g, "-"),
