@@ -89,7 +89,12 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None,
         how = {"command": f"the coefficients were estimated with an amplifier limit of "
                           f"about {limit or 0:.3g} A modelled, and stay marked unreliable",
                "coil": "the coefficients were estimated with the clipped coil current "
-                       "modelled, and stay marked unreliable"}.get(
+                       "modelled, and stay marked unreliable",
+               "magnet_force_law": "the coefficients were estimated with the magnets' "
+                                   "force law modelled (the gap and bias of the linearity "
+                                   "check), with its uncertainty in their intervals",
+               "slew_limit": "the coefficients were estimated with the amplifier's slew "
+                             "limit modelled, with its uncertainty in their intervals"}.get(
             lin.values.get("modelled"), "the coefficients are unreliable")
         return Adequacy(False, "model NOT adequate: the loop is not linear (see the "
                         f"linearity check); {how}. Record again with a smaller excitation, "
@@ -127,7 +132,8 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
     taken = take_in_clipping(recording, names, priors, seed, checks, fwd.parts, eps, nominal)
     checks = replace(checks, checks=(
         *checks.checks,
-        linearity_check(recording, taken.clip, taken.modelled, taken.shift, taken.fitted),
+        linearity_check(recording, taken.clip, taken.modelled, taken.shift, taken.fitted,
+                        taken.screened),
         information_check(recording, checks, taken.fitted)))
     return checks, taken.fitted, taken.eps
 

@@ -20,12 +20,22 @@ import numpy as np
 from bayes_amb.discrepancy.checks import DataChecks, recompute_u
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
 from bayes_amb.discrepancy.linearity import (
+    LIMIT_SD,
     Clipping,
+    Regression,
     at_extremes,
     clip_defect,
     clipping,
     flat_top_channels,
     r2_response,
+)
+from bayes_amb.discrepancy.nonlinear import (
+    RIG_FORCE_LAW,
+    Nonlinearity,
+    better_fit,
+    rig_force_law,
+    screen,
+    slew_screen,
 )
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
@@ -36,46 +46,110 @@ from bayes_amb.io.recording import Recording
 class TakenIn:
     """The nominal fit with any clipping taken in: the fit, its eps, the clipping
     regression's result (None when the defect came from a recorded coil current or was
-    not looked for), how it was modelled ('command', 'coil' or None) and how far the
-    coefficients moved."""
+    not looked for), how it was modelled ('command', 'coil', 'magnet_force_law',
+    'slew_limit' or None), how far the coefficients moved, and the force-law and slew
+    screens' results (nonlinear.py; the found one first)."""
 
     fitted: FittedModel
     eps: np.ndarray
     clip: Clipping | None
     modelled: str | None
     shift: np.ndarray | None
+    screened: tuple[Nonlinearity, ...] = ()
+
+    @property
+    def nonlinearity(self) -> Nonlinearity | None:
+        """The force law or slew limit modelled (found in the record, or the force law
+        the rig file's bias gives), if any."""
+        return self.screened[0] if self.modelled in (*(n.name for n in self.screened),
+                                                      RIG_FORCE_LAW) else None
 
 
 def take_in_clipping(recording: Recording, names: tuple[str, ...],
                      priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
                      parts, eps: np.ndarray, nominal: FittedModel) -> TakenIn:
-    """Look for clipping and, where found, refit the nominal model with it modelled."""
+    """Look for clipping, the magnets' force law and a slew limit and, where one is
+    found, refit the nominal model with it modelled (the clip first: it is the one a
+    flat top or a limit proves)."""
     d = coil_defect(recording, checks)
-    clip = None
+    clip, screened, found = None, (), None
     if d is not None:
         eps = dual_youla_eps(parts, checks.y, checks.u - d)     # the commanded current
     else:
-        clip = clipping(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
-        d = (clip_defect(checks.u, clip.limit_a, np.array(clip.centre_a)) if clip.found
-             else None)
+        reg = Regression(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
+        clip = clipping(nominal.like, nominal.params, nominal.log10_sigma, checks.u,
+                        reg=reg)
+        if clip.found:
+            d = clip_defect(checks.u, clip.limit_a, np.array(clip.centre_a))
+            # a slew limit also cuts the largest steps: the better of the two is named
+            slew = slew_screen(reg, checks.u, recording.dt)
+            if slew.found:
+                ds = slew.defect(recording.rig, checks.u, checks.y, recording.dt)
+                if better_fit(reg, ds, d):
+                    clip, found, screened, d = None, slew, (slew,), ds
+        elif found is None:
+            screened = tuple(screen(nominal.like, nominal.params, nominal.log10_sigma,
+                                    checks.u, checks.y, recording.rig, reg=reg))
+            if screened[0].found:
+                found = screened[0]
+            elif (law := rig_force_law(recording.rig)) is not None:
+                found = law
+                screened = (law, *screened)
+            if found is not None:
+                d = found.defect(recording.rig, checks.u, checks.y, recording.dt)
     if d is None:
-        return TakenIn(nominal, eps, clip, None, None)
+        return TakenIn(nominal, eps, clip, None, None, screened)
     raw = nominal.params.copy()
-    corrected = eps
-    for _ in range(2):                           # T_r2 at the previous fit
-        corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
-        refit = fit_nominal(recording, names, corrected, priors, seed=seed,
-                            start=checks.start)
-        if not np.isfinite(refit.log_post):
-            break
-        nominal = refit
+    corrected, nominal = _refit(recording, names, priors, seed, checks, eps, nominal, d)
     shift = nominal.params - raw
+    if found is not None:
+        nominal.extra_cov = _parameter_spread(recording, names, priors, seed, checks, eps,
+                                              nominal, found)
+        how = RIG_FORCE_LAW if found.source == "rig file" else found.name
+        return TakenIn(nominal, corrected, clip, how, shift, screened)
     if clip is None:
         nominal.extra_cov = (CLIP_MODEL_SD**2) * np.outer(shift, shift)
     else:
         nominal.extra_cov = _limit_spread(recording, names, priors, seed, checks, eps,
                                           nominal, clip)
     return TakenIn(nominal, corrected, clip, "command" if clip is not None else "coil", shift)
+
+
+def _refit(recording: Recording, names: tuple[str, ...], priors: dict[str, Prior] | None,
+           seed: int, checks: DataChecks, eps: np.ndarray, nominal: FittedModel,
+           d: np.ndarray) -> tuple[np.ndarray, FittedModel]:
+    """The nominal fit on eps - T_r2(theta) d, twice (T_r2 at the previous fit)."""
+    corrected = eps
+    for _ in range(2):
+        corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
+        refit = fit_nominal(recording, names, corrected, priors, seed=seed,
+                            start=checks.start)
+        if not np.isfinite(refit.log_post):
+            break
+        nominal = refit
+    return corrected, nominal
+
+
+def _parameter_spread(recording: Recording, names: tuple[str, ...],
+                      priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
+                      eps: np.ndarray, fitted: FittedModel, found: Nonlinearity
+                      ) -> np.ndarray:
+    """The coefficients' covariance from the nonlinear parameter's own error: per
+    location, refits with it one sd below and above its estimate (T_r2 at the fit), half
+    their difference as one sd (rank one each, summed)."""
+    cov = np.zeros((fitted.params.size, fitted.params.size))
+    ends = found.ends()
+    for lo, hi in zip(ends[::2], ends[1::2], strict=True):
+        pair = []
+        for at in (lo, hi):
+            d = found.defect(recording.rig, checks.u, checks.y, recording.dt, at=at)
+            fit = fit_nominal(recording, names,
+                              eps - r2_response(fitted.like.forward, fitted.params, d),
+                              priors, seed=seed, start=checks.start)
+            pair.append(fit.params if np.isfinite(fit.log_post) else fitted.params)
+        half = 0.5 * (pair[1] - pair[0])
+        cov += np.outer(half, half)
+    return cov
 
 
 def _limit_spread(recording: Recording, names: tuple[str, ...],
@@ -100,13 +174,6 @@ CLIP_MODEL_SD = 0.1
 """Relative sd of the modelled clip's effect on the coefficients when the defect is read
 from a recorded coil current (exact but for the amplifier offset and noise it leaves out):
 the fit's extra_cov is (0.1 shift)(0.1 shift)^T, shift: how far the coefficients moved."""
-LIMIT_SD = 0.01
-"""Relative sd of an estimated amplifier limit (the regression's profile): 1 %, the
-largest error seen on the command-recorded clips of the first benchmark run (0.2-1 %,
-mean 0.6 %: the amplifier noise and offsets before the clip that d leaves out); with 2 %
-the intervals of a 3-5 % clipped record span most of the prior."""
-
-
 def coil_defect(recording: Recording, checks: DataChecks) -> np.ndarray | None:
     """The clip defect of a recorded coil current held at its extremes (flat tops in u_*):
     recorded minus commanded current on the held samples, zero elsewhere; None when no u

@@ -30,6 +30,7 @@ import xarray as xr
 
 from bayes_amb import __version__
 from bayes_amb.discrepancy.adequacy import judge, nominal_assessment
+from bayes_amb.discrepancy.amplitude_answer import nonlinearity_block
 from bayes_amb.discrepancy.balancing import balancing, check_planes
 from bayes_amb.discrepancy.checks import DataChecks
 from bayes_amb.discrepancy.direct_terms import averaged, direct_companions, with_direct_terms
@@ -180,6 +181,9 @@ def _after_from(named: FittedModel, reported: FittedModel, mixed: bool) -> str:
 
 def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
              unexplained: dict[str, Any], substitutes: list[dict[str, Any]]) -> str:
+    if checks.failed == ["linearity"] and next(
+            c for c in checks.checks if c.name == "linearity").values.get("modelled"):
+        return "nonlinear"
     if checks.failed:
         return "data check failed"
     if unexplained["present"] or substitutes:
@@ -344,6 +348,9 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "parameters_after": theta_summary(reported, s_coef),
         "parameters_after_from": _after_from(sel.final, reported, s_coef is not s_fin),
         "direct_terms": direct,
+        "nonlinearity": nonlinearity_block(
+            next(c for c in checks.checks if c.name == "linearity").values,
+            recording.rig, checks.u, recording.dt, theta_summary(reported, s_coef)),
         "model_error": {"before": _model_error_dict(nominal),
                         "after": _model_error_dict(reported)},
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "

@@ -58,6 +58,11 @@ ALPHA = 1e-4
 """Family-wise level of the clipping test (over the candidate limits)."""
 GAIN_RANGE = (0.5, 2.0)
 """beta must reach 1 within this range: the clip's path through the loop is known."""
+LIMIT_SD = 0.01
+"""Relative sd of an estimated amplifier limit (the regression's profile): 1 %, the
+largest error seen on the command-recorded clips of the first benchmark run (0.2-1 %,
+mean 0.6 %: the amplifier noise and offsets before the clip that d leaves out); with 2 %
+the intervals of a 3-5 % clipped record span most of the prior."""
 JAC_STEP = 1e-4
 BAND_BINS = 48
 """Bins per narrow band of the linear partialling (a smooth linear misfit is nearly
@@ -170,7 +175,7 @@ def r2_response(forward, theta: NDArray, d: NDArray) -> NDArray:
     return ss_response(A, B[:, 8:12], C, np.asarray(D)[:, 8:12], d)
 
 
-class _Regression:
+class Regression:
     """The whitened residual DFT of a fitted model, its Jacobian, its r2 -> eps filter and
     the band grouping, shared by the clipping test and the limit's estimate."""
 
@@ -207,12 +212,22 @@ class _Regression:
         return np.concatenate([w.real.reshape(-1, *V.shape[2:]),
                                w.imag.reshape(-1, *V.shape[2:])])
 
-    def clip_dft(self, limit: float, centre: NDArray | None = None) -> NDArray:
-        """T_r2 d in the likelihood's bins (nf, 4), d the clip defect at this limit and
-        centre, prefiltered and windowed as the residual is."""
-        w = lfilter(self.like.prefilter, [1.0], clip_defect(self.u, limit, centre), axis=0)
+    def defect_dft(self, d: NDArray) -> NDArray:
+        """T_r2 d in the likelihood's bins (nf, 4) for a current d (N, 4) added at the
+        plant input, prefiltered and windowed as the residual is."""
+        w = lfilter(self.like.prefilter, [1.0], d, axis=0)
         D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
         return np.einsum("kij,kj->ki", self.H, D)
+
+    def clip_dft(self, limit: float, centre: NDArray | None = None) -> NDArray:
+        """T_r2 d in the likelihood's bins (nf, 4), d the clip defect at this limit and
+        centre."""
+        return self.defect_dft(clip_defect(self.u, limit, centre))
+
+    def linear_free(self, X: NDArray) -> NDArray:
+        """Regression rows of bins X (nf, 4) freed of their fit on the DFTs of u and the
+        excitation within narrow bands (the part not linear in the loop's own signals)."""
+        return self.rows(_residualise(X, self.U, self.narrow))
 
     def z_rows(self, limit: float, centre: NDArray | None = None) -> NDArray:
         """Regression rows of T_r2 d for the clip defect at this limit and centre."""
@@ -224,7 +239,7 @@ class _Regression:
         (Frisch-Waugh): the part of d that is not linear in the loop's own signals. A
         linear misfit (a lag the model lacks, which with r2 excitation is linear in the
         very currents d is cut from) cannot fake it."""
-        x = self.rows(_residualise(self.clip_dft(limit), self.U, self.narrow))
+        x = self.linear_free(self.clip_dft(limit))
         b, wt = self.band_weights(x[:, None], self.y_linear_free)
         return float(b[0] * np.sqrt(np.sum((x * wt) ** 2)))
 
@@ -284,12 +299,15 @@ def _argmin_1d(f, grid: NDArray) -> float:
     return float(grid[j])
 
 
-def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clipping:
+def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray,
+             reg: Regression | None = None) -> Clipping:
     """The clipping regression on a fitted model's residual (module docstring).
 
     like: the model's likelihood (residual DFT, prefilter, window, bins, noise spectrum);
-    params, log10_sigma: its fit; u (N, 4) the recorded currents as they entered eps."""
-    reg = _Regression(like, params, log10_sigma, u)
+    params, log10_sigma: its fit; u (N, 4) the recorded currents as they entered eps;
+    reg: the regression of that fit, when already built (the nonlinearity screen shares
+    it)."""
+    reg = reg or Regression(like, params, log10_sigma, u)
     limits = np.quantile(reg.pooled, QUANTILES)
     fits = [reg.gain(limit) for limit in limits]
     beta = np.array([f[0] for f in fits])
@@ -310,12 +328,14 @@ def clipping(like, params: NDArray, log10_sigma: NDArray, u: NDArray) -> Clippin
 
 def linearity_check(rec: Recording, clip: Clipping | None = None,
                     modelled: str | None = None, shift: NDArray | None = None,
-                    fitted: Any = None) -> Check:
+                    fitted: Any = None, screened: tuple = ()) -> Check:
     """The ``linearity`` data check: it fails on flat tops in the record, or when the
-    clipping regression (given as ``clip``) finds a clipped current in the residual.
+    clipping regression (given as ``clip``) finds a clipped current in the residual, or
+    the force-law or slew screens (``screened``, nonlinear.py) find theirs.
     modelled: how the fit took the nonlinearity in ('command': clip(u) at the estimated
-    limit; 'coil': the documented controller's command on the held samples), or None;
-    shift: how far the coefficients moved when it was modelled."""
+    limit; 'coil': the documented controller's command on the held samples;
+    'magnet_force_law', 'slew_limit': that law at its estimate), or None; shift: how far
+    the coefficients moved when it was modelled."""
     flats = flat_tops(rec)
     hits = limit_hits(rec)
     lines = detection_line_test(rec)
@@ -324,6 +344,9 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
                     "detection_lines": lines.to_dict(),
                     **({} if amp is None else amp.to_dict()),
                     **(clip.to_dict() if clip is not None else {}),
+                    "screens": [n.to_dict() for n in screened],
+                    "nonlinearity": next((n.to_dict() for n in screened
+                                          if n.found or n.source == "rig file"), None),
                     "modelled": modelled,
                     "coefficient_shift": None if shift is None else [float(v) for v in shift]}
     problems = [*flats, *hits, *([lines.problem()] if lines.found else []),
@@ -334,6 +357,11 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
             f"about its centre ({100 * clip.share:.2g} % of the samples beyond it): gain "
             f"{clip.beta:.2f} +- {clip.beta_sd:.2f} through the model's own loop, where a "
             f"clipping amplifier gives 1 (z {clip.z:.0f})")
+    for n in screened:
+        if n.found:
+            problems.append(f"the residual follows the {n.text()} (z {n.z:.0f}, "
+                            f"{n.z_linear_free:.0f} after the loop's linear signals are "
+                            f"taken out; threshold {n.z_crit:.1f})")
     if not problems:
         tail = (f", and the residual does not follow a clipped current (z {clip.z:.1f})"
                 if clip is not None else "")
@@ -343,11 +371,50 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
                if lines.design and lines.worst else "")
         grows = ("" if amp is None else ", the residual does not grow with the amplitude "
                  f"(p {min(amp.p.values()):.2g})")
+        tested = [n for n in screened if n.source == "record"]
+        laws = ("" if not tested else ", nor a magnet force law or a slew limit (z "
+                + ", ".join(f"{n.z:.1f}" for n in tested) + ")")
+        law = next((n for n in screened if n.source == "rig file"), None)
+        if law is not None:
+            laws += (f"; the {law.text()} is modelled (one record at one level cannot tell "
+                     "it from a stiffness change; the coefficients are the small-signal "
+                     "ones)")
+        elif screened and fitted is not None and (caveat := unknown_bias_line(rec, fitted)):
+            laws += "; " + caveat
         return Check("linearity", True,
-                     "linearity: no flat tops in u or y" + lims + odd + grows + tail, values)
+                     "linearity: no flat tops in u or y" + lims + odd + grows + tail + laws,
+                     values)
+    what = {"magnet_force_law": "the magnets' force law beyond its linearisation: no "
+                                "linear physics is named, and the coefficients are "
+                                "estimated with the law modelled at the estimated gap "
+                                "(a smaller excitation keeps the currents nearer the "
+                                "linearisation)",
+            "slew_limit": "the amplifier's slew-rate limit: no linear physics is named, "
+                          "and the coefficients are estimated with the limit modelled "
+                          "(a smaller excitation, or one with fewer fast steps, keeps "
+                          "di/dt below the limit)"}.get(
+        modelled, "an amplifier current limit or a probe at the end of its range: no "
+                  "physics is named, and the coefficients are estimated with the limit "
+                  "modelled where it can be (keep the currents below the amplifier limit "
+                  "and the probes inside their range: a smaller excitation)")
     return Check("linearity", False,
                  "linearity: FAILED - " + "; ".join(problems) + ". The loop is not linear "
-                 "here (an amplifier current limit or a probe at the end of its range): "
-                 "no physics is named, and the coefficients are estimated with the limit "
-                 "modelled where it can be (keep the currents below the amplifier limit "
-                 "and the probes inside their range: a smaller excitation)", values)
+                 f"here ({what})", values)
+
+
+def unknown_bias_line(rec: Recording, fitted: Any) -> str:
+    """What a record at one level cannot say about the magnets' force law when the rig
+    file gives no bias current: the stiffness a linear fit reads is ks (1 + <(i/i0)^2>),
+    equal to the small-signal ks within its interval only for a bias above a bound."""
+    u = np.asarray(rec.u, dtype=float)
+    rms = float(np.sqrt(np.mean((u - np.median(u, axis=0)) ** 2)))
+    sd = [np.sqrt(fitted.cov[i, i]) for i, n in enumerate(fitted.names)
+          if n.startswith("k_") and fitted.cov is not None and i < fitted.cov.shape[0]]
+    half = 1.645 * float(np.median(sd)) if sd else 0.0
+    if not half > 0 or rms <= 0:
+        return ""
+    return (f"the stiffnesses are read at this record's {rms:.3g} A rms current: they are "
+            f"the small-signal ones within their intervals if the magnets' bias current "
+            f"exceeds {rms / np.sqrt(half):.3g} A (the force law reads ks (1 + "
+            "<(i/i0)^2>); give bearings.bias_current in the rig file to model it, or "
+            "diagnose records at two excitation levels)")

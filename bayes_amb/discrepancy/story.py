@@ -89,6 +89,14 @@ def plain_language(d: Diagnosis) -> str:
     expl = d.explanations
     checks = d.checks
     failed = [c.line for c in checks if not c.ok]
+    nl = d.nonlinearity
+    if d.verdict == "nonlinear" and nl is not None:
+        return (f"The loop is not linear: the record holds the {nl.title}, modelled as a "
+                "transform of the recorded signals, so no linear physics is named and the "
+                "bearing coefficients are estimated with it in the model (its uncertainty "
+                "in their intervals). " + "; ".join(failed) + "."
+                + (f" Where the linearisation holds: {nl.linear_range}." if nl.linear_range
+                   else ""))
     if failed:
         return ("The data failed a check, so no physics is named: " + "; ".join(failed)
                 + ".")

@@ -117,6 +117,9 @@ def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed
     own = summary["parameters"]
     why = ("the model is not adequate: intervals of the posterior with the band-wise model "
            "error integrated out (see adequacy)" if nominal.model_error is not None else
+           "the magnets' force law of the rig file's bias current is modelled: intervals "
+           "of the adequacy's fit with it (Laplace, with the bias's uncertainty)"
+           if nominal.extra_cov is not None else
            "this likelihood's Laplace approximation failed at its MAP (no negative-definite "
            "curvature): intervals of the adequacy's fit (robust Whittle, Laplace)")
     rig = nominal.forward.recording.rig
@@ -308,8 +311,8 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     if opt.adequacy:
         verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
         summary["adequacy"] = verdict.to_dict()
-        if verdict.adequate and not (opt.map_only and cov is None
-                                        and bounded is None):
+        if verdict.adequate and nominal.extra_cov is None and not (
+                opt.map_only and cov is None and bounded is None):
             nominal = None
     if opt.map_only:
         summary["inference"] = "MAP with Laplace approximation"

@@ -244,6 +244,24 @@ class StandIn(Block):
 
 
 @block
+class Nonlinearity(Block):
+    """The magnets' or amplifier's nonlinearity the linearity check found and modelled
+    (discrepancy/nonlinear.py): its parameter per location with a 90 % interval, and the
+    amplitude answer (where the linearisation holds within the coefficients' intervals)."""
+
+    name: str
+    title: str
+    where: list[str]
+    parameter: str
+    unit: str
+    estimate: dict[str, float]
+    hdi90: dict[str, list[float]]
+    z: float
+    linear_range: str = ""
+    derived: dict[str, Any] | None = omitted()
+
+
+@block
 class BalancingPlane(Block):
     """One correction plane: unbalance magnitude and phase with their intervals."""
 
@@ -351,6 +369,7 @@ class Diagnosis(Block):
     parameters_after_from: str = ""
     direct_terms: list[EffectFit] = field(default_factory=list)
     model_error: ModelErrors | None = omitted()
+    nonlinearity: Nonlinearity | None = omitted()
     criterion: str
     inference: str
     seed: int

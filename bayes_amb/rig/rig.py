@@ -78,6 +78,14 @@ class Magnet:
     ki: float
     ks: float
     constants: tuple[tuple[str, float], ...] = ()
+    bias: float | None = None
+
+    @property
+    def bias_current(self) -> float | None:
+        """The bias current i0 (A) when the rig file gives it (with the constants, or as
+        ``bias_current`` beside ki and ks): the magnets' force law then follows, with the
+        gap i0 ki / ks that makes its linearisation ki and ks (discrepancy/nonlinear.py)."""
+        return dict(self.constants).get("bias_current", self.bias)
 
 
 @dataclass(frozen=True)
@@ -180,16 +188,18 @@ class Rig:
         (the shorthand), else per bearing (its magnet's constants where it was given so)."""
         mags = self.magnets
         shared = (all(not m.constants for m in mags.values())
-                  and len({(m.ki, m.ks) for m in mags.values()}) == 1)
+                  and len({(m.ki, m.ks, m.bias) for m in mags.values()}) == 1)
         if shared:
             m = next(iter(mags.values()))
             return {"ki": m.ki, "ks": m.ks,
+                    **({} if m.bias is None else {"bias_current": m.bias}),
                     **{k: {"node": v} for k, v in self.bearing_nodes.items()}}
         out: dict[str, Any] = {}
         for b, node in self.bearing_nodes.items():
             m = mags[b]
             out[b] = ({"node": node, "magnet": dict(m.constants)} if m.constants
-                      else {"node": node, "ki": m.ki, "ks": m.ks})
+                      else {"node": node, "ki": m.ki, "ks": m.ks,
+                            **({} if m.bias is None else {"bias_current": m.bias})})
         return out
 
 
@@ -306,13 +316,13 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
         ))
     if len({d.name for d in discs}) != len(discs):
         raise r.fail("discs", "disc names must be unique")
-    bt = r.table(data, "bearings", "bearings", {"ki", "ks", "A", "B"})
+    bt = r.table(data, "bearings", "bearings", {"ki", "ks", "bias_current", "A", "B"})
     bearing_nodes = {}
     sensor_nodes = {}
     magnets = {}
     st = r.table(data, "sensors", "sensors", {"A", "B"})
     for b in ("A", "B"):
-        tb = r.table(bt, b, f"bearings.{b}", {"node", "ki", "ks", "magnet"})
+        tb = r.table(bt, b, f"bearings.{b}", {"node", "ki", "ks", "bias_current", "magnet"})
         bearing_nodes[b] = r.node(tb, "node", f"bearings.{b}.node", n_nodes)
         magnets[b] = _magnet(r, bt, tb, b)
         sensor_nodes[b] = r.node(r.table(st, b, f"sensors.{b}", {"node"}), "node",
@@ -350,8 +360,9 @@ def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:
     table's shared ki and ks."""
     f = f"bearings.{b}"
     if "magnet" in tb:
-        if "ki" in tb or "ks" in tb:
-            raise r.fail(f"{f}.magnet", "give ki and ks or the magnet's constants, not both")
+        if "ki" in tb or "ks" in tb or "bias_current" in tb:
+            raise r.fail(f"{f}.magnet", "give ki and ks (and bias_current) or the magnet's "
+                         "constants, not both")
         mt = r.table(tb, "magnet", f"{f}.magnet", set(MAGNET_KEYS))
         vals = {k: r.number(mt, k, f"{f}.magnet.{k}", nonneg=k == "pole_angle",
                             upper=math.pi / 2 if k == "pole_angle" else None)
@@ -359,8 +370,11 @@ def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:
         ki, ks = magnet_constants(**vals)
         return Magnet(ki=ki, ks=ks, constants=tuple(vals.items()))
     src, where = (tb, f) if ("ki" in tb or "ks" in tb) else (bt, "bearings")
+    bsrc, bwhere = (tb, f) if "bias_current" in tb else (bt, "bearings")
+    bias = (r.number(bsrc, "bias_current", f"{bwhere}.bias_current")
+            if "bias_current" in bsrc else None)
     return Magnet(ki=r.number(src, "ki", f"{where}.ki"),
-                  ks=r.number(src, "ks", f"{where}.ks", nonneg=True))
+                  ks=r.number(src, "ks", f"{where}.ks", nonneg=True), bias=bias)
 
 
 LIMIT_KEYS = {"current_a": "the largest control current the amplifiers deliver, |u| (A)",

@@ -2,13 +2,17 @@
 
     bayes-amb controller --dt 1e-4 --export ctrl.json
     python -m benchmarks.foreign OUT_DIR --controller ctrl.json [--seed 1] [--scale 1]
+        [--duration 2] [--kinds force_law=3,slew_limit=3,...] [--eta 0.3]
 
 The default suite has 90 recordings: 10 controls, 4 of each of the 10 in-family single
 effects, 10 pairs, 6 held-out (pedestal), 4 full-truth, then (issue 27) 5 controls with a
 process force (control_force) and 5 of each held-out family current_limit, seal and
 ks_drift; ``--scale`` multiplies every count. The first 70 are drawn as before (each
 recording's seed is spawned by its position). OUT_DIR/index.json lists them with their
-effects and concealments.
+effects and concealments. ``--kinds`` writes those kinds and counts instead of the default
+suite (e.g. the nonlinear ones: force_law, slew_limit, iron_saturation, amp_voltage_limit,
+pair:force_law+actuator_lag); ``--eta`` sets every case's excitation amplitude (A; default
+the habits' 0.3 A; a magnet law's gap is drawn from eta / i0, so it follows).
 """
 
 from __future__ import annotations
@@ -30,9 +34,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--scale", type=float, default=1.0)
     ap.add_argument("--duration", type=float, default=2.0, help="record length, s")
+    ap.add_argument("--kinds", default="",
+                    help="kind=count,... instead of the default suite (--scale multiplies)")
+    ap.add_argument("--eta", type=float, default=None,
+                    help="excitation amplitude, A (default: the habits' 0.3 A)")
     a = ap.parse_args(argv)
-    kinds = {k: max(1, round(n * a.scale)) for k, n in DEFAULT_SUITE.items()}
-    index = write_suite(a.out_dir, kinds, a.seed, a.controller, duration_s=a.duration)
+    suite = ({k: int(v) for k, v in (c.split("=") for c in a.kinds.split(",") if c)}
+             if a.kinds else DEFAULT_SUITE)
+    kinds = {k: max(1, round(n * a.scale)) for k, n in suite.items()}
+    extra = {} if a.eta is None else {"eta_amplitude_a": a.eta}
+    index = write_suite(a.out_dir, kinds, a.seed, a.controller, duration_s=a.duration,
+                        **extra)
     print(f"{len(index)} recordings in {a.out_dir} (index.json)")
     return 0
 

@@ -54,6 +54,7 @@ from bayes_amb.io.recording import load_recording
 from bayes_amb.rig import load_rig
 from benchmarks.foreign import CaseSpec, Effect, draw_case, read_controller, write_case
 from benchmarks.foreign.cases import clean_response
+from benchmarks.foreign.effects import NONLINEAR as FOREIGN_NONLINEAR
 from benchmarks.foreign.plant import AXES
 
 DEFAULT_KINDS = ("control", "actuator_lag", "actuator_delay", "sensor_delay", "sensor_gain",
@@ -63,8 +64,10 @@ DEFAULT_KINDS = ("control", "actuator_lag", "actuator_delay", "sensor_delay", "s
 """The default kinds; a kind's position here is part of its recordings' seeds (new kinds
 are appended, so the older ones keep their recordings)."""
 
-NONLINEAR = {"current_limit"}
-"""Foreign effects that make the loop nonlinear (a failed 'linearity' check catches them)."""
+NONLINEAR = set(FOREIGN_NONLINEAR)
+"""Foreign effects that make the loop nonlinear (a failed 'linearity' check catches them):
+current_limit, magnet_force_law, slew_limit and the held-out iron_saturation and
+amp_voltage_limit."""
 
 COEFFICIENTS = tuple(f"{g}_{a}" for g in "kc" for a in AXES)
 """The eight bearing coefficients of the coverage table (the truth file's theta keys)."""
@@ -479,7 +482,8 @@ def recording_coverage(name: str, truth: dict[str, Any], report: dict[str, Any] 
     rec: dict[str, Any] = {
         "name": name, "family": family(truth["kind"]),
         "nonlinear": any(e["name"] in NONLINEAR for e in truth["effects"]),
-        "clipped_share": truth.get("draws", {}).get("clipped_share")}
+        "clipped_share": truth.get("draws", {}).get("clipped_share"),
+        "slew_limited_share": truth.get("draws", {}).get("slew_limited_share")}
     if report is not None:
         rec.update(verdict=report.get("verdict"), linearity_failed=linearity_failed(report),
                    coefficients=coefficient_coverage(truth["theta"],

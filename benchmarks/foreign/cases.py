@@ -23,7 +23,15 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.rig import Rig, load_rig
-from benchmarks.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
+from benchmarks.foreign.effects import (
+    EFFECT_PARAMS,
+    HELD_OUT,
+    MAGNET_LAWS,
+    NONLINEAR,
+    NONLINEAR_SEEN,
+    Effect,
+    build_plant,
+)
 from benchmarks.foreign.habits import Habits, draw_force, draw_habits, habit_signals
 from benchmarks.foreign.loop import (
     ClosedLoop,
@@ -35,12 +43,16 @@ from benchmarks.foreign.loop import (
 from benchmarks.foreign.plant import AXES, bearing_changes, rotor
 from benchmarks.foreign.write import write_recording
 
-IN_FAMILY = tuple(n for n in EFFECT_PARAMS if n not in HELD_OUT)
+IN_FAMILY = tuple(n for n in EFFECT_PARAMS if n not in HELD_OUT and n not in NONLINEAR_SEEN)
 """Single effects the benchmark draws as kinds (besides 'control', 'control_force', 'pair',
-the held-out effects, 'held_out' (= 'pedestal'), 'full_truth' and 'bending')."""
+the held-out effects, 'held_out' (= 'pedestal'), 'full_truth' and 'bending'); what a random
+'pair' draws from."""
+
+KIND_EFFECT = {"force_law": "magnet_force_law"}
+"""Case kinds (and names in 'pair:<a>+<b>') that stand for an effect of another name."""
 
 KINDS = ("control", "control_force", *IN_FAMILY, "pair", "held_out", *HELD_OUT,
-         "full_truth", "bending", "control_one_channel")
+         "full_truth", "bending", "control_one_channel", "force_law", "slew_limit")
 
 
 @dataclass(frozen=True)
@@ -83,7 +95,9 @@ class Simulated:
     records: the controller's command, or with a ``current_limit`` recording 'coil' the
     coil current), eta (N, 4) A, eps (N, 4) m (the controller's innovation output), noise
     (N, 4) m, draws (dict; with a current limit 'clipped_share', the share of samples and
-    channels at the limit), w (N, 4) A the total commanded current (command + r2 + offset)."""
+    channels at the limit), w (N, 4) A the total commanded current (command + r2 + offset),
+    coil (N, 4) A the current the amplifiers deliver (held over the sample; with a slew or
+    voltage limit its value at the end of the sample)."""
 
     y: NDArray
     u: NDArray
@@ -92,6 +106,7 @@ class Simulated:
     noise: NDArray
     draws: dict[str, Any]
     w: NDArray | None = None
+    coil: NDArray | None = None
 
 
 def _controller(spec: CaseSpec, controller: Controller | str | os.PathLike | None
@@ -174,13 +189,53 @@ def simulate(spec: CaseSpec, controller: Controller | str | None, rng: np.random
         draws["clipped_share"] = float(np.mean(np.abs(r.w[keep]) > plant.i_max_a))
         if limit and limit[0].params["recorded"] == "coil":
             u = r.coil
+    if r.limited is not None:
+        draws["slew_limited_share"] = float(np.mean(r.limited[keep]))
+        draws["slew_ramp_time_share"] = float(np.mean(r.ramp[keep]))
+    if r.i_mag is not None:
+        draws["magnets"] = magnet_draws(spec, plant, r.i_mag[keep], r.x_mag[keep])
     if sig["force"] is not None:
         f = sig["force"][keep]
         on = np.any(f != 0, axis=0)
         draws["force_rms_n"] = np.sqrt(np.mean(f[:, on] ** 2, axis=0)).tolist()
         draws["force_equivalent_current_a"] = (np.array(draws["force_rms_n"]) / rig.ki).tolist()
     return Simulated(r.y[keep], u[keep], sig["eta"][keep], r.eps[keep], sig["noise"][keep],
-                     draws, r.w[keep])
+                     draws, r.w[keep], r.coil[keep])
+
+
+def magnet_draws(spec: CaseSpec, plant: Any, i_mag: NDArray, x_mag: NDArray
+                 ) -> list[dict[str, Any]]:
+    """What a magnet law did on the record (i_mag, x_mag: the current in force (A) and the
+    air gap at the bearing node (m), (N, 4), recorded part), one dict per law: its
+    ``effect``, ``axes``, ``gap_m``, ``i0_a``, ``f0_n``, the ``excitation_level``
+    eta / i0, the true small-signal slopes at (0, 0) (``ki_true_at_0`` N/A,
+    ``ks_true_at_0`` N/m) and per axis: ``i_rms_over_i0``, ``x_max_over_gap``,
+    ``ks_shift_n_per_m`` (the linear-equivalent stiffness shift, an estimate: the mean
+    over the samples of df/dx at (i, 0) minus the rig's ks; for the force law exactly
+    ks mean((i / i0)^2), with 'unsaturated' slopes it includes their drop at 0),
+    ``ki_shift_n_per_a`` (likewise df/di at (i, 0) minus ki: zero for the force law) and
+    ``k_theta_linear_equivalent`` = theta - ks_shift / ks (the tool's k_<axis> a linear
+    fit would approach, an estimate that ignores how the fit weights the samples)."""
+    out = []
+    for law in plant.magnets:
+        axes = [AXES[c] for c in law.channels]
+        ki0, ks0 = law.slopes_at_zero()
+        d: dict[str, Any] = {
+            "effect": law.effect, "axes": axes, "gap_m": law.gap_m, "i0_a": law.i0_a,
+            "f0_n": law.f0_n, "excitation_level": spec.habits.eta_amplitude_a / law.i0_a,
+            "ki_true_at_0": ki0, "ks_true_at_0": ks0,
+            "i_rms_over_i0": {}, "x_max_over_gap": {}, "ks_shift_n_per_m": {},
+            "ki_shift_n_per_a": {}, "k_theta_linear_equivalent": {}}
+        for c, ax in zip(law.channels, axes, strict=True):
+            i, x = i_mag[:, c], x_mag[:, c]
+            shift = float(np.mean(law.stiffness_at(i)) - law.ks)
+            d["i_rms_over_i0"][ax] = float(np.sqrt(np.mean(i**2)) / law.i0_a)
+            d["x_max_over_gap"][ax] = float(np.max(np.abs(x)) / law.gap_m)
+            d["ks_shift_n_per_m"][ax] = shift
+            d["ki_shift_n_per_a"][ax] = float(np.mean(law.gain_at(i)) - law.ki)
+            d["k_theta_linear_equivalent"][ax] = spec.k_theta[ax] - shift / law.ks
+        out.append(d)
+    return out
 
 
 def clean_response(spec: CaseSpec, ctrl: Controller, eta: NDArray, rig: Rig,
@@ -218,10 +273,30 @@ SEAL_NODES = ("D1", "D2", "mid")
 or balance-piston seal between the bearings at nodes 8 and 33 of the reference rig)."""
 
 
+EXCITATION_LEVEL = (0.1, 0.4)
+"""The range a magnet law's excitation level eta / i0 is drawn from (its gap follows:
+g0 = i0 ki / ks, i0 = eta / level)."""
+
+
 def _draw_effect(name: str, rng: np.random.Generator, noise: float,
-                 duration_s: float = 2.0, speed_rpm: float = 31500.0) -> Effect:
-    """A first draw of one effect (scaled later by :func:`conceal`)."""
+                 duration_s: float = 2.0, speed_rpm: float = 31500.0,
+                 eta_a: float = 0.3,
+                 level: tuple[float, float] | float = EXCITATION_LEVEL) -> Effect:
+    """A first draw of one effect (scaled later by :func:`conceal`; the nonlinear ones are
+    not: a magnet law's gap is drawn from the excitation level eta_a / i0 in ``level`` (a
+    range or one value), a slew limit's S is calibrated later)."""
     u = rng.uniform
+    if name in MAGNET_LAWS:
+        lo, hi = (level, level) if np.isscalar(level) else level
+        if not eta_a > 0:
+            raise ValueError(f"{name}: the gap is drawn from eta / i0; eta is {eta_a} A")
+        rig = load_rig()
+        gap = eta_a / u(lo, hi) * rig.ki / rig.ks        # i0 = eta / level, g0 = i0 ki / ks
+        p = {"gap_m": gap, "where": str(rng.choice(_WHERE))}
+        if name == "iron_saturation":
+            p.update(b_sat_ratio=u(1.3, 2.0), slopes="rig")
+        return Effect(name, {k: (float(v) if isinstance(v, np.floating) else v)
+                             for k, v in p.items()})
     if name == "actuator_lag":
         p = {"bandwidth_hz": u(300, 2000), "where": str(rng.choice(_WHERE))}
     elif name == "actuator_2nd":
@@ -252,6 +327,12 @@ def _draw_effect(name: str, rng: np.random.Generator, noise: float,
     elif name == "current_limit":       # i_max_a is set by calibrate_current_limit
         p = {"i_max_a": None, "recorded": str(rng.choice(["command", "coil"])),
              "clipped_share_target": u(0.01, 0.05)}
+    elif name == "slew_limit":          # slew_a_per_s is set by calibrate_slew_limit
+        p = {"slew_a_per_s": None, "recorded": "command",
+             "limited_share_target": u(0.05, 0.25)}
+    elif name == "amp_voltage_limit":   # slew_a_per_s = v_ratio x typical rate (calibrated)
+        p = {"bandwidth_hz": u(1500.0, 4000.0), "v_ratio": u(*V_RATIO),
+             "slew_a_per_s": None}
     elif name == "seal":
         # gas seal: cross-coupled k, direct K of either sign, C from a whirl-frequency
         # ratio k / (C Omega) of 0.3-0.8, a small cross-coupled damping
@@ -307,8 +388,8 @@ def _weaker(e: Effect, f: float = 0.7) -> Effect:
         p["rate_per_s"] *= f
     elif e.name == "probe_angle":
         p["angle_deg"] *= f
-    elif e.name == "current_limit":
-        raise ValueError("current_limit is not concealed: its strength is the clipped share")
+    elif e.name in NONLINEAR:
+        raise ValueError(f"{e.name} is not concealed: its strength is its own parameter")
     return Effect(e.name, p)
 
 
@@ -324,29 +405,46 @@ def _beyond_cap(e: Effect, duration_s: float) -> bool:
 
 def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | None = None,
               duration_s: float = 2.0, dt: float = 1e-4, noise_rms_m: float = 5e-8,
-              habits: bool = True) -> CaseSpec:
+              habits: bool = True, eta_amplitude_a: float | None = None,
+              excitation_level: tuple[float, float] | float = EXCITATION_LEVEL) -> CaseSpec:
     """Draw a case of a kind (KINDS, or 'pair:<a>+<b>'): bearings off nominal, habits drawn,
     effects drawn at a first guess (scaled to concealment in [0.2, 1) by :func:`conceal`;
-    a current limit's i_max by :func:`calibrate_current_limit`). 'control_force' is a
-    control with a process force at the discs (habits.draw_force, drawn last);
-    'control_one_channel' a control excited on one channel only (a test design, drawn
-    last)."""
+    a current limit's i_max by :func:`calibrate_current_limit`, a slew limit's S by
+    :func:`calibrate_slew_limit`, an amp_voltage_limit's by :func:`calibrate_amplifier`).
+    'control_force' is a control with a process force at the discs (habits.draw_force,
+    drawn last); 'control_one_channel' a control excited on one channel only (a test
+    design, drawn last). 'force_law' (or 'magnet_force_law') is the magnets' force law at
+    one or both bearings, 'slew_limit' the amplifiers' slew-rate limit; either may be
+    named in a pair, e.g. 'pair:force_law+actuator_lag'.
+
+    ``eta_amplitude_a``: the excitation amplitude (A) instead of the habits' 0.3 A (no
+    extra draw). ``excitation_level``: the range (or value) of eta / i0 a magnet law's gap
+    is drawn from (g0 = i0 ki / ks, i0 = eta / level)."""
     k_theta = {a: float(rng.uniform(-0.3, 0.3)) for a in AXES}
     c_nsm = {a: float(rng.uniform(0.0, 300.0)) for a in AXES}
     hab = draw_habits(rng, noise_rms_m) if habits else Habits(noise_rms_m=noise_rms_m)
+    if eta_amplitude_a is not None:
+        hab = replace(hab, eta_amplitude_a=float(eta_amplitude_a))
     truth, n_bending, effects = "reduced", 0, ()
+
+    def one(name: str) -> Effect:
+        return _draw_effect(KIND_EFFECT.get(name, name), rng, noise_rms_m, duration_s,
+                            eta_a=hab.eta_amplitude_a, level=excitation_level)
+
     if kind == "control":
         pass
     elif kind == "control_force":
         hab = draw_force(hab, rng, load_rig().ki)
     elif kind == "control_one_channel":
         hab = replace(hab, eta_channels=(str(rng.choice(AXES)),))
-    elif kind in IN_FAMILY or kind in HELD_OUT:
-        effects = (_draw_effect(kind, rng, noise_rms_m, duration_s),)
+    elif KIND_EFFECT.get(kind, kind) in (*IN_FAMILY, *HELD_OUT, *NONLINEAR_SEEN):
+        effects = (one(kind),)
     elif kind == "pair" or kind.startswith("pair:"):
         names = (kind[5:].split("+") if ":" in kind
                  else list(rng.choice(IN_FAMILY, size=2, replace=False)))
-        effects = tuple(_draw_effect(str(n), rng, noise_rms_m) for n in names)
+        effects = tuple(_draw_effect(KIND_EFFECT.get(str(n), str(n)), rng, noise_rms_m,
+                                     eta_a=hab.eta_amplitude_a, level=excitation_level)
+                        for n in names)
     elif kind == "held_out":
         effects = (_draw_effect("pedestal", rng, noise_rms_m),)
     elif kind == "full_truth":
@@ -370,7 +468,8 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
     """Bring each effect's concealment into ``band`` (default [0.2, 1)): weaken it by steps
     of 0.7 while it is >= band[1]; if its first draw is below band[0], strengthen it by
     1/0.7 while the stronger version stays below band[1] (and, for a ks_drift, within
-    KS_DRIFT_CAP). A current limit is left alone (see calibrate_current_limit). Returns the
+    KS_DRIFT_CAP). The nonlinear effects (NONLINEAR: a current or slew limit, a magnet law,
+    a voltage-limited amplifier) are left alone (see write_case). Returns the
     case and the concealments per effect (index:name), of all effects together ('all') and of the
     flexible modes of a full or bending truth ('flexible', never changed)."""
     n = round(spec.duration_s / spec.dt)
@@ -387,7 +486,7 @@ def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig
         return c if np.isfinite(c) else np.inf
 
     for i, e in enumerate(effects):
-        if e.name == "current_limit":       # its strength is its clipped share instead
+        if e.name in NONLINEAR:             # its strength is its own parameter instead
             continue
         c = conc(e)
         for _ in range(max_tries):
@@ -449,6 +548,107 @@ def calibrate_current_limit(spec: CaseSpec, ctrl: Controller, rng: np.random.Gen
                 "y_change_over_noise": change}
 
 
+V_RATIO = (0.7, 1.4)
+"""The range an amp_voltage_limit's v_ratio is drawn from: S = v_ratio x the rms rate of
+the unlimited lag. With 0.3 A binary eta the rms rate is about 0.7 x the rate a full
+0.6 A eta step starts with, so v_ratio < ~1.2 caps every eta step (README gives the shares
+and the rate cap's own effect on y over this range)."""
+
+
+def _copy(rng: np.random.Generator) -> np.random.Generator:
+    """A generator in the same state (rng itself is not advanced)."""
+    copy = np.random.Generator(type(rng.bit_generator)())
+    copy.bit_generator.state = rng.bit_generator.state
+    return copy
+
+
+def _with(spec: CaseSpec, i: int, **params: Any) -> CaseSpec:
+    """The case with effect i's params updated."""
+    effects = list(spec.effects)
+    effects[i] = Effect(effects[i].name, {**effects[i].params, **params})
+    return replace(spec, effects=tuple(effects))
+
+
+def _without(spec: CaseSpec, i: int) -> CaseSpec:
+    return replace(spec, effects=spec.effects[:i] + spec.effects[i + 1:])
+
+
+def _i_max(spec: CaseSpec) -> float:
+    return min([e.params["i_max_a"] for e in spec.effects
+                if e.name == "current_limit" and e.params["i_max_a"] is not None] or [np.inf])
+
+
+def _y_change(a: Simulated, b: Simulated, spec: CaseSpec) -> float:
+    return float(np.sqrt(np.mean((a.y - b.y) ** 2)) / spec.habits.noise_rms_m)
+
+
+def record_change(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig,
+                  i: int) -> float:
+    """rms(y with - y without effect i) / noise rms on the record's own draws (habits on;
+    rng not advanced): the record-level strength of a nonlinear effect."""
+    return _y_change(simulate(spec, ctrl, _copy(rng), rig),
+                     simulate(_without(spec, i), ctrl, _copy(rng), rig), spec)
+
+
+def calibrate_slew_limit(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator,
+                         rig: Rig, max_tries: int = 5, rel_tol: float = 0.15
+                         ) -> tuple[CaseSpec, dict[str, float]]:
+    """Set a slew limit's S so that the current fails to reach the command within the
+    sample on about its ``limited_share_target`` of samples and channels: S dt starts at
+    that quantile of the command's steps |a[k] - a[k-1]| in the unlimited run (a the
+    amplifier's target, clip(w) under a current limit) and moves to that quantile of
+    |a[k] - i_end[k-1]| in the limited run until the share is within ``rel_tol`` of the
+    target or after ``max_tries`` runs, all on the record's own draws (rng not advanced).
+    Returns the case and {'slew_a_per_s', 'slew_limited_share' (measured),
+    'y_change_over_noise' (rms of y with minus y without the limit, over the noise rms)}."""
+    i = next(k for k, e in enumerate(spec.effects) if e.name == "slew_limit")
+    target = spec.effects[i].params["limited_share_target"]
+    i_max = _i_max(spec)
+
+    def steps(sim: Simulated) -> NDArray:
+        return np.abs(np.clip(sim.w[1:], -i_max, i_max) - sim.coil[:-1])
+
+    def trial(S: float | None) -> tuple[CaseSpec, Simulated]:
+        sp = _with(spec, i, slew_a_per_s=S)
+        return sp, simulate(sp, ctrl, _copy(rng), rig)
+
+    _, free = trial(None)
+    S = float(np.quantile(steps(free), 1.0 - target)) / spec.dt
+    for _ in range(max_tries):
+        sp, sim = trial(S)
+        share = sim.draws["slew_limited_share"]
+        if abs(share - target) <= rel_tol * target:
+            break
+        S = float(np.quantile(steps(sim), 1.0 - target)) / spec.dt
+    return sp, {"slew_a_per_s": sp.effects[i].params["slew_a_per_s"],
+                "slew_limited_share": share, "y_change_over_noise": _y_change(sim, free, spec)}
+
+
+def calibrate_amplifier(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator,
+                        rig: Rig) -> tuple[CaseSpec, dict[str, float]]:
+    """Set an amp_voltage_limit's S = v_ratio x the typical rate: the rms over the recorded
+    samples and channels of wb |a[k] - i(t_k)| (the rate the unlimited lag starts each
+    sample with) on the record's own draws (rng not advanced). Returns the case and
+    {'slew_a_per_s', 'typical_rate_a_per_s', 'slew_limited_share' (measured),
+    'y_change_over_noise' (against an ideal amplifier), 'rate_cap_y_change_over_noise'
+    (against the same lag without the cap)}."""
+    i = next(k for k, e in enumerate(spec.effects) if e.name == "amp_voltage_limit")
+    p = spec.effects[i].params
+    i_max = _i_max(spec)
+    free = simulate(_with(spec, i, slew_a_per_s=None), ctrl, _copy(rng), rig)
+    rate = 2 * np.pi * p["bandwidth_hz"] * np.abs(np.clip(free.w[1:], -i_max, i_max)
+                                                   - free.coil[:-1])
+    typical = float(np.sqrt(np.mean(rate**2)))
+    sp = _with(spec, i, slew_a_per_s=p["v_ratio"] * typical)
+    sim = simulate(sp, ctrl, _copy(rng), rig)
+    ideal = simulate(_without(sp, i), ctrl, _copy(rng), rig)
+    return sp, {"slew_a_per_s": sp.effects[i].params["slew_a_per_s"],
+                "typical_rate_a_per_s": typical,
+                "slew_limited_share": sim.draws["slew_limited_share"],
+                "y_change_over_noise": _y_change(sim, ideal, spec),
+                "rate_cap_y_change_over_noise": _y_change(sim, free, spec)}
+
+
 def truth_record(spec: CaseSpec, rig: Rig, concealments: dict[str, float],
                  draws: dict[str, Any]) -> dict[str, Any]:
     """The truth file's content (see README.md of this package for the keys)."""
@@ -485,14 +685,28 @@ def write_case(spec: CaseSpec, out_dir: str | os.PathLike, name: str,
     if conceal_effects and (spec.effects or spec.truth == "full" or spec.n_bending
                             or spec.static_correction):
         spec, conc = conceal(spec, ctrl, rng, rig)
-    if any(e.name == "current_limit" for e in spec.effects):
+    names = [e.name for e in spec.effects]
+    calib: dict[str, Any] = {}
+    # the nonlinear effects' strength: record-level, rms(y with - y without) / noise
+    if "current_limit" in names:
         spec, limit = calibrate_current_limit(spec, ctrl, rng, rig)
-        i = [e.name for e in spec.effects].index("current_limit")
-        conc[f"{i}:current_limit"] = limit["y_change_over_noise"]   # record-level, see README
-        if len(spec.effects) == 1:
-            conc["all"] = limit["y_change_over_noise"]
+        conc[f"{names.index('current_limit')}:current_limit"] = limit["y_change_over_noise"]
+    if "slew_limit" in names:
+        spec, limit = calibrate_slew_limit(spec, ctrl, rng, rig)
+        conc[f"{names.index('slew_limit')}:slew_limit"] = limit["y_change_over_noise"]
+    if "amp_voltage_limit" in names:
+        spec, limit = calibrate_amplifier(spec, ctrl, rng, rig)
+        conc[f"{names.index('amp_voltage_limit')}:amp_voltage_limit"] = \
+            limit["y_change_over_noise"]
+        calib.update({k: limit[k] for k in ("typical_rate_a_per_s",
+                                            "rate_cap_y_change_over_noise")})
+    for i, n in enumerate(names):
+        if n in MAGNET_LAWS:
+            conc[f"{i}:{n}"] = record_change(spec, ctrl, rng, rig, i)
+    if len(names) == 1 and names[0] in NONLINEAR:
+        conc["all"] = conc[f"0:{names[0]}"]
     sim = simulate(spec, ctrl, rng, rig)
-    truth = truth_record(spec, rig, conc, sim.draws)
+    truth = truth_record(spec, rig, conc, {**sim.draws, **calib})
     return write_recording(Path(out_dir) / name, spec.dt, sim.y, sim.u, sim.eta,
                            spec.speed_rpm, ctrl.raw,
                            notes=f"foreign generator, case kind {spec.kind}", truth=truth)

@@ -24,6 +24,15 @@ The same system broken open at the amplifier input (w = Cw X + Dw e enters throu
 runs an amplifier current limit, clip(w), sample by sample; a plant that varies slowly in
 time runs as a staircase of such systems (:func:`run_segments`); disc forces (N) enter
 through ``Bf``, held over each sample like the current.
+
+The magnets' force law (``magnet_force_law``, ``iron_saturation``) runs the same way: its
+remainder beyond ki i + ks x is computed per sample from the state at the sampling instant
+(the current in force just after it, the air gap at the bearing node) and enters through
+``Bn``, held over the sample. An amplifier with dynamics within the sample
+(``slew_limit``, ``amp_voltage_limit``; no delays) stores the current it delivered at the
+end of the sample in the delay line's first slot; over the sample the plant receives that
+end value held (through ``Bw``) plus the waveform's deficit as the exact means over
+AMP_SUBSTEPS sub-intervals, each through e^{A (dt - (j + 1) h)} Gam(h) (``Gsub``).
 """
 
 from __future__ import annotations
@@ -37,7 +46,7 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
-from benchmarks.foreign.effects import ContinuousPlant
+from benchmarks.foreign.effects import AMP_SUBSTEPS, Amplifier, ContinuousPlant, MagnetLaw
 
 _Y = ("y_Ax", "y_Ay", "y_Bx", "y_By")
 _ETA = ("eta_Ax", "eta_Ay", "eta_Bx", "eta_By")
@@ -103,7 +112,16 @@ class ClosedLoop:
     w = Cw X + Dw e is the total commanded current (controller output, r2, offset; A) and
     X[k+1] = Aop X[k] + Bop e[k] + Bw a(w[k]), a the amplifier map (a(w) = w gives
     Acl = Aop + Bw Cw, Bcl = Bop + Bw Dw). ``Bf`` (nx, 4): the sampled disc forces
-    [D1x, D1y, D2x, D2y] (N, held over one sample of z) into X."""
+    [D1x, D1y, D2x, D2y] (N, held over one sample of z) into X.
+
+    Nonlinear magnets and amplifiers (see the module doc): ``Bn`` (nx, 4) bearing-node
+    forces (N, held over one sample) into X; ``Cxb`` (4, nx) the air gap at the bearing
+    nodes (m) and ``Ccur`` (4, nx) + ``cur_dir`` * (applied current) the current in force
+    (A) at the sampling instant; ``start_slot`` the first X index of the delay-line slot
+    holding the current applied just after the sampling instant (-1: this sample's own
+    a(w[k])); ``Gsub`` (nx, 4 m) the sub-interval input matrices [G_0 .. G_{m-1}];
+    ``line0`` the first X index of the delay line; ``magnets``, ``amp`` and ``dt`` as
+    the plant has them."""
 
     Acl: NDArray
     Bcl: NDArray
@@ -121,6 +139,16 @@ class ClosedLoop:
     Cw: NDArray | None = None
     Dw: NDArray | None = None
     Bf: NDArray | None = None
+    Bn: NDArray | None = None
+    Cxb: NDArray | None = None
+    Ccur: NDArray | None = None
+    cur_dir: NDArray | None = None
+    start_slot: int = -1
+    Gsub: NDArray | None = None
+    line0: int = 0
+    magnets: tuple[MagnetLaw, ...] = ()
+    amp: Amplifier | None = None
+    dt: float = 0.0
 
     def initial_state(self, plant_x0: NDArray) -> NDArray:
         X = np.zeros(self.Acl.shape[0])
@@ -193,6 +221,31 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     Bf = np.zeros((nx, 4))
     if plant.F is not None:
         Bf[iz] = _gamma(plant.A, plant.F, dt)[1]
+    nonlin: dict[str, Any] = {}
+    if plant.magnets:
+        Bn = np.zeros((nx, 4))
+        Bn[iz] = _gamma(plant.A, plant.Fb, dt)[1]
+        Cxb, Ccur = np.zeros((4, nx)), np.zeros((4, nx))
+        Cxb[:, iz], Ccur[:, iz] = plant.xb_row, plant.cur_row
+        # the current applied just after the sampling instant: w[k-n-1] if the switch
+        # falls inside the sample, else w[k-n] (this sample's own for n = 0)
+        slot = (line[n_shift].start if f > 0 else
+                line[n_shift - 1].start if n_shift > 0 else -1)
+        nonlin.update(Bn=Bn, Cxb=Cxb, Ccur=Ccur, cur_dir=np.array(plant.cur_dir, float),
+                      start_slot=slot, magnets=plant.magnets)
+    if plant.amp is not None:
+        if n_shift or f:
+            raise ValueError(f"{plant.amp.effect} is not played with a delay")
+        m = AMP_SUBSTEPS
+        Eh, Gh = _gamma(plant.A, plant.B, dt / m)
+        G = [Gh]
+        for _ in range(m - 1):
+            G.insert(0, Eh @ G[0])                     # G_j = e^{A (dt - (j+1) h)} Gam(h)
+        Gsub = np.zeros((nx, 4 * m))
+        Gsub[iz] = np.hstack(G)
+        nonlin.update(Gsub=Gsub, amp=plant.amp, start_slot=line[0].start)
+    if nonlin:
+        nonlin.update(line0=line[0].start, dt=dt)
     Cu = ctrl.Duy @ Cy
     Cu[:, ik] += ctrl.Cu
     Du = ctrl.Duy @ Dy
@@ -201,7 +254,8 @@ def closed_loop(plant: ContinuousPlant, ctrl: Controller) -> ClosedLoop:
     Ce[:, ik] += ctrl.Ce
     De = ctrl.Dey @ Dy
     De[:, :4] += ctrl.Dee
-    return ClosedLoop(A, Bm, Cy, Dy, Cu, Du, Ce, De, np_, nk, Aop, Bop, Bw, Cw, Dw, Bf)
+    return ClosedLoop(A, Bm, Cy, Dy, Cu, Du, Ce, De, np_, nk, Aop, Bop, Bw, Cw, Dw, Bf,
+                      **nonlin)
 
 
 def run(cl: ClosedLoop, e: NDArray, X0: NDArray, force: NDArray | None = None
@@ -217,7 +271,13 @@ def run(cl: ClosedLoop, e: NDArray, X0: NDArray, force: NDArray | None = None
 class LoopRun:
     """A run of the loop: y_m, u (the controller's command), eps, w (the total commanded
     current, A), coil (the current the amplifier delivers: w, or clip(w) with a current
-    limit; A), all (N, 4); X the final state."""
+    limit, held over the sample; with an amplifier with dynamics, its value at the end of
+    the sample; A), all (N, 4); X the final state. With a magnet law: i_mag (the current in
+    force, A), x_mag (the air gap at the bearing node, m), n_mag (the force beyond the
+    linearisation, N), each (N, 4) at the sampling instants (zero on channels without a
+    law). With an amplifier with dynamics: limited (N, 4) bool (its rate limit reached)
+    and ramp (N, 4) (the fraction of the sample at the rate cap), see
+    effects.Amplifier.waveform."""
 
     y: NDArray
     u: NDArray
@@ -225,6 +285,11 @@ class LoopRun:
     w: NDArray
     coil: NDArray
     X: NDArray
+    i_mag: NDArray | None = None
+    x_mag: NDArray | None = None
+    n_mag: NDArray | None = None
+    limited: NDArray | None = None
+    ramp: NDArray | None = None
 
 
 def run_segments(segments: list[tuple[int, ClosedLoop]], e: NDArray, X0: NDArray,
@@ -234,8 +299,9 @@ def run_segments(segments: list[tuple[int, ClosedLoop]], e: NDArray, X0: NDArray
     ``segments``: (first sample, loop) pairs, first samples increasing from 0: a plant that
     changes with time (slowly, piecewise constant) runs each loop from its first sample on.
     ``i_max_a``: the amplifiers deliver clip(w, -i_max_a, i_max_a) (A) instead of w, a
-    sample-level nonlinearity run with the open-loop form of :class:`ClosedLoop`; with
-    i_max_a = inf the linear recursion X[k+1] = Acl X[k] + Bcl e[k] runs."""
+    sample-level nonlinearity run with the open-loop form of :class:`ClosedLoop`; so do the
+    loops' magnet laws and amplifier dynamics (see the module doc). With none of them the
+    linear recursion X[k+1] = Acl X[k] + Bcl e[k] runs."""
     N = e.shape[0]
     if segments[0][0] != 0:
         raise ValueError(f"the first segment must start at sample 0, not {segments[0][0]}")
@@ -243,10 +309,16 @@ def run_segments(segments: list[tuple[int, ClosedLoop]], e: NDArray, X0: NDArray
     X = X0.copy()
     bounds = [s for s, _ in segments[1:]] + [N]
     clipped = np.isfinite(i_max_a)
+    magnets = any(cl.magnets for _, cl in segments)
+    dynamic = any(cl.amp is not None for _, cl in segments)
+    coil = np.empty((N, 4)) if dynamic else None
+    mag = np.zeros((3, N, 4)) if magnets else None
+    limited = np.zeros((N, 4), bool) if dynamic else None
+    ramp = np.zeros((N, 4)) if dynamic else None
     for (k0, cl), k1 in zip(segments, bounds, strict=True):
         if k1 <= k0:
             continue
-        if not clipped:
+        if not (clipped or magnets or dynamic):
             drive = e[k0:k1] @ cl.Bcl.T
             if force is not None:
                 drive = drive + force[k0:k1] @ cl.Bf.T
@@ -254,20 +326,49 @@ def run_segments(segments: list[tuple[int, ClosedLoop]], e: NDArray, X0: NDArray
             for k in range(k0, k1):
                 Xs[k] = X
                 X = A @ X + drive[k - k0]
-        else:
-            drive = e[k0:k1] @ cl.Bop.T
-            if force is not None:
-                drive = drive + force[k0:k1] @ cl.Bf.T
-            wd = e[k0:k1] @ cl.Dw.T
-            A, Bw, Cw = cl.Aop, cl.Bw, cl.Cw
-            for k in range(k0, k1):
-                Xs[k] = X
-                w = Cw @ X + wd[k - k0]
-                X = A @ X + drive[k - k0] + Bw @ np.clip(w, -i_max_a, i_max_a)
+            continue
+        drive = e[k0:k1] @ cl.Bop.T
+        if force is not None:
+            drive = drive + force[k0:k1] @ cl.Bf.T
+        wd = e[k0:k1] @ cl.Dw.T
+        A, Bw, Cw = cl.Aop, cl.Bw, cl.Cw
+        amp, laws, slot = cl.amp, cl.magnets, cl.start_slot
+        m = 0 if cl.Gsub is None else cl.Gsub.shape[1] // 4
+        for k in range(k0, k1):
+            Xs[k] = X
+            w = Cw @ X + wd[k - k0]
+            a = np.clip(w, -i_max_a, i_max_a) if clipped else w
+            Xn = A @ X + drive[k - k0]
+            if amp is not None:
+                end, means, limited[k], ramp[k] = amp.waveform(X[slot:slot + 4], a,
+                                                               cl.dt, m)
+                Xn += Bw @ end + cl.Gsub @ (means - end).ravel()
+                coil[k] = end
+            else:
+                Xn += Bw @ a
+            if laws:
+                applied = a if slot < 0 else X[slot:slot + 4]
+                cur = cl.Ccur @ X + cl.cur_dir * applied
+                gap = cl.Cxb @ X
+                rem = np.zeros(4)
+                for law in laws:
+                    c = list(law.channels)
+                    rem[c] = law.remainder(cur[c], gap[c])
+                mag[0, k], mag[1, k], mag[2, k] = cur, gap, rem
+                Xn += cl.Bn @ rem
+            X = Xn
     cl = segments[0][1]     # output maps do not change with the plant's time variation
     y = Xs @ cl.Cy.T + e @ cl.Dy.T
     u = Xs @ cl.Cu.T + e @ cl.Du.T
     eps = Xs @ cl.Ce.T + e @ cl.De.T
     w = Xs @ cl.Cw.T + e @ cl.Dw.T
-    coil = np.clip(w, -i_max_a, i_max_a) if clipped else w
-    return LoopRun(y, u, eps, w, coil, X)
+    if coil is None:
+        coil = np.clip(w, -i_max_a, i_max_a) if clipped else w
+    if magnets:
+        on = np.zeros(4, bool)
+        for _, c in segments:
+            for law in c.magnets:
+                on[list(law.channels)] = True
+        mag[:2, :, ~on] = 0.0
+    return LoopRun(y, u, eps, w, coil, X, *(mag if magnets else (None, None, None)),
+                   limited, ramp)

@@ -1,0 +1,107 @@
+"""The nonlinearity a diagnosis modelled, for its report: the parameter per location with
+its 90 % interval, and the amplitude answer (where the linearisation holds), from the
+linearity check's values (nonlinear.py, linearity.py)."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from bayes_amb.discrepancy.linearity import LIMIT_SD
+from bayes_amb.discrepancy.nonlinear import (
+    FORCE_LAW,
+    RIG_FORCE_LAW,
+    SLEW,
+    TITLES,
+    bias_per_gap,
+    centred,
+)
+from bayes_amb.rig import Rig
+
+UNITS = {"gap_m": "m", "slew_a_per_s": "A/s", "limit_a": "A"}
+
+
+def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
+                       coefficients: dict[str, dict[str, Any]]) -> dict[str, Any] | None:
+    """The diagnosis' nonlinearity block from the linearity check's values (None when no
+    nonlinearity was modelled): the parameter per location with its 90 % interval and the
+    amplitude answer. coefficients: the reported bearing coefficients (theta summaries)."""
+    modelled = values.get("modelled")
+    if modelled is None:
+        return None
+    u = centred(u)
+    if modelled in (FORCE_LAW, SLEW, RIG_FORCE_LAW):
+        n = values["nonlinearity"]
+        block = {"name": n["name"], "title": TITLES[n["name"]], "where": n["where"],
+                 "parameter": n["parameter"], "unit": UNITS[n["parameter"]],
+                 "estimate": n["estimate"], "hdi90": n["interval90"], "z": n["z"]}
+    elif modelled == "command":
+        lim = values["clipping_limit_a"]
+        block = {"name": "current_limit", "title": TITLES["current_limit"],
+                 "where": ["all"], "parameter": "limit_a", "unit": "A",
+                 "estimate": {"all": lim},
+                 "hdi90": {"all": [lim * (1 - 1.645 * LIMIT_SD), lim * (1 + 1.645 * LIMIT_SD)]},
+                 "z": values.get("clipping_z", 0.0)}
+    else:                                           # a recorded coil current held at a limit
+        return {"name": "current_limit", "title": TITLES["current_limit"], "where": ["all"],
+                "parameter": "", "unit": "", "estimate": {}, "hdi90": {}, "z": 0.0,
+                "linear_range": "the coil current is held at the amplifier limit on the "
+                                "flat tops of the record: keep the excitation below it"}
+    block["linear_range"], block["derived"] = _amplitude_answer(block, rig, u, dt,
+                                                                 coefficients)
+    return block
+
+
+def _half_width(coefficients: dict[str, dict[str, Any]], bearing: str) -> float | None:
+    """The median 90 % half-width (theta) of a bearing's stiffness coefficients."""
+    hw = [0.5 * (c["hdi90"][1] - c["hdi90"][0]) for n, c in coefficients.items()
+          if n.startswith(f"k_{bearing}")]
+    return float(np.median(hw)) if hw else None
+
+
+def _amplitude_answer(block: dict[str, Any], rig: Rig, u: NDArray, dt: float,
+                      coefficients: dict[str, dict[str, Any]]) -> tuple[str, dict]:
+    """Where the linearisation holds: the force law's stiffness shift a linear fit makes
+    at this record's current, and the rms current below which it stays inside the
+    stiffness intervals; the slew limit's largest step per sample; the current limit's
+    share."""
+    if block["name"] == FORCE_LAW:
+        rhos = bias_per_gap(rig)
+        parts, derived = [], {}
+        for b in block["where"]:
+            j = "AB".index(b)
+            sl = slice(2 * j, 2 * j + 2)
+            i0 = float(np.mean(rhos[sl]) * block["estimate"][b])
+            rms = float(np.sqrt(np.mean(u[:, sl] ** 2)))
+            shift = (rms / i0) ** 2                 # relative ks a linear fit adds
+            hw = _half_width(coefficients, b)
+            i_max = None if hw is None else i0 * np.sqrt(hw)
+            derived[b] = {"bias_current_a": i0, "rms_current_a": rms,
+                          "ks_shift_relative": shift,
+                          "ks_shift_n_per_m": shift * rig.magnets[b].ks,
+                          "linear_rms_current_a": None if i_max is None else float(i_max)}
+            kn = shift * rig.magnets[b].ks / 1e3
+            line = (f"bearing {b}: bias {i0:.3g} A; at this record's {rms:.3g} A rms a "
+                    f"linear fit reads ks {100 * shift:.2g} % ({kn:.3g} kN/m) too high")
+            if i_max is not None:
+                line += (f"; the linearisation holds within the stiffness intervals "
+                         f"(+-{100 * hw:.2g} %) below {i_max:.3g} A rms (an excitation "
+                         f"scaled by {min(1.0, i_max / rms):.2g} or less)")
+            parts.append(line)
+        return "; ".join(parts), derived
+    if block["name"] == SLEW:
+        rate = block["estimate"]["all"]
+        steps = np.abs(np.diff(u, axis=0))
+        share = float(np.mean(steps > rate * dt))
+        return (f"the amplifier follows steps of up to {rate * dt:.3g} A per sample "
+                f"({rate:.4g} A/s); this record asks more on {100 * share:.2g} % of the "
+                "samples: an excitation with smaller or fewer fast steps (a lower level, "
+                "or a smoother signal than a random binary one) stays linear",
+                {"largest_step_a": rate * dt, "limited_share": share})
+    lim = block["estimate"]["all"]
+    share = float(np.mean(np.abs(u) > lim))
+    return (f"the amplifier delivers at most {lim:.3g} A about its centre; this record "
+            f"asks more on {100 * share:.2g} % of the samples: scale the excitation so "
+            "that the current stays below it", {"limited_share": share})

@@ -1,0 +1,118 @@
+"""The magnets' force law and the amplifier's slew limit as transforms of the recorded
+signals (discrepancy/nonlinear.py): the laws themselves, and the screen's decision on
+records whose nonlinearity is known."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from bayes_amb.discrepancy.nonlinear import (
+    force_law_defect,
+    force_law_regressors,
+    model_displacement,
+    nonlinear_part,
+    slew_defect,
+)
+from bayes_amb.planning.plan import magnet_range_note
+from bayes_amb.rig import load_rig
+
+
+@pytest.fixture(scope="module")
+def rig():
+    return load_rig()
+
+
+def test_force_law_defect_is_the_cubic_expansion_for_small_signals(rig):
+    """d = N / ki with N = F0 (4 xi iota^2 + 12 iota xi^2 + 8 xi^3) + O(5th order), i.e.
+    d = (x u^2 / rho + 3 u x^2 + 2 rho x^3) / g0^2 (module docstring)."""
+    rng = np.random.default_rng(0)
+    g0 = 4e-4
+    rho = rig.magnets["A"].ks / rig.magnets["A"].ki
+    i0 = rho * g0
+    u = 0.01 * i0 * rng.standard_normal((2000, 4))
+    x = 0.01 * g0 * rng.standard_normal((2000, 4))
+    u -= np.median(u, axis=0)
+    x -= np.median(x, axis=0)
+    d = force_law_defect(rig, u, x, {"A": g0, "B": g0})
+    cubic = (x * u ** 2 / rho + 3 * u * x ** 2 + 2 * rho * x ** 3) / g0 ** 2
+    # fifth-order terms: relative (4 sd of 1 %)^2 times a coefficient of a few
+    assert np.max(np.abs(d - cubic)) < 1e-2 * np.max(np.abs(cubic))
+    # and the exact law is the differential pair's force beyond ki i + ks x
+    i, xx = u[:, 0], x[:, 0]
+    F0 = rig.magnets["A"].ki * i0 / 4
+    f = F0 * ((1 + i / i0) ** 2 / (1 - xx / g0) ** 2 - (1 - i / i0) ** 2 / (1 + xx / g0) ** 2)
+    lin = rig.magnets["A"].ki * i + rig.magnets["A"].ks * xx
+    np.testing.assert_allclose(d[:, 0], (f - lin) / rig.magnets["A"].ki, rtol=1e-8,
+                               atol=1e-12 * np.max(np.abs(f)))
+    # a bearing without a gap is linear
+    assert np.all(force_law_defect(rig, u, x, {"A": g0})[:, 2:] == 0)
+
+
+def test_force_law_regressors_hold_no_linear_part(rig):
+    """The screen's regressors are free of [1, u, x] per channel: the probes' noise in x
+    (which the residual also holds) cannot make them significant."""
+    rng = np.random.default_rng(1)
+    u, x = rng.standard_normal((3000, 4)), 1e-5 * rng.standard_normal((3000, 4))
+    h = force_law_regressors(rig, u, x)
+    for b, cols in (("A", [0, 1]), ("B", [2, 3])):
+        other = [c for c in range(4) if c not in cols]
+        assert np.all(h[b][:, other] == 0)
+        for c in cols:
+            Z = np.column_stack([np.ones(3000), u[:, c] - np.median(u[:, c]),
+                                 x[:, c] - np.median(x[:, c])])
+            assert np.max(np.abs(Z.T @ h[b][:, c])) < 1e-8 * np.linalg.norm(Z) * \
+                np.linalg.norm(h[b][:, c])
+    d = rng.standard_normal((500, 4))
+    assert np.allclose(nonlinear_part(d + 3.0 * u[:500] - 2.0, u[:500], x[:500]),
+                       nonlinear_part(d, u[:500], x[:500]))
+
+
+def test_slew_defect_limits_the_rate_and_vanishes_for_a_fast_amplifier():
+    rng = np.random.default_rng(2)
+    dt = 1e-4
+    u = 0.3 * np.sign(rng.standard_normal((4000, 4)))      # random binary steps of 0.6 A
+    assert np.max(np.abs(slew_defect(u, 1e9, dt))) < 1e-3   # 0.6 A in 0.6 us
+    rate = 2000.0                                             # 0.2 A per sample at most
+    d = slew_defect(u, rate, dt)
+    # the mean current per sample moves by at most rate * dt between samples (a ramp's
+    # mean changes by no more than the ramp in one sample)
+    assert np.max(np.abs(np.diff(u + d, axis=0))) <= rate * dt * (1 + 1e-9)
+    assert np.mean(np.abs(d) > 1e-12) > 0.5
+    # a ramp that ends inside the sample lags by rate tau^2 / (2 dt) on average
+    step = np.zeros((3, 1))
+    step[1:] = 0.1                                            # 0.1 A: tau = 50 us < dt
+    dd = slew_defect(step, rate, dt)
+    assert dd[1, 0] == pytest.approx(-rate * (0.1 / rate) ** 2 / (2 * dt))
+    assert dd[2, 0] == 0.0
+
+
+def test_model_displacement_is_rigid_body_kinematics(rig):
+    """At the sensor planes it returns the probes; a tilt is interpolated linearly."""
+    z = rig.shaft.node_z
+    za, zb = z[rig.sensor_nodes["A"] - 1], z[rig.sensor_nodes["B"] - 1]
+    ba, bb = z[rig.bearing_nodes["A"] - 1], z[rig.bearing_nodes["B"] - 1]
+    y = np.array([[1.0, 2.0, 3.0, 5.0]])                      # Ax, Ay, Bx, By
+    q = model_displacement(rig, y)
+    slope_x, slope_y = (3.0 - 1.0) / (zb - za), (5.0 - 2.0) / (zb - za)
+    np.testing.assert_allclose(q[0], [1 + slope_x * (ba - za), 2 + slope_y * (ba - za),
+                                      1 + slope_x * (bb - za), 2 + slope_y * (bb - za)])
+
+
+def test_plan_warns_when_the_current_leaves_the_magnets_linear_range(rig):
+    """With a bias current in the rig file, a current whose (i/i0)^2 exceeds the stiffness
+    interval's half-width is named, with the rms current where the range ends."""
+    import dataclasses
+
+    from bayes_amb.rig.rig import Magnet
+    m = rig.magnets["A"]
+    biased = dataclasses.replace(rig, magnets={
+        b: Magnet(m.ki, m.ks, (("gap", 4e-4), ("bias_current", 1.6))) for b in "AB"})
+    pars = {f"k_{b}{a}": {"sd": 0.002} for b in "AB" for a in "xy"}
+    rng = np.random.default_rng(3)
+    small = 0.05 * rng.standard_normal((5000, 4))             # (0.05/1.6)^2 = 0.1 %
+    assert magnet_range_note(biased, small, pars) is None
+    big = 0.4 * rng.standard_normal((5000, 4))                # 6 % > 0.33 %
+    note = magnet_range_note(biased, big, pars)
+    assert note is not None and "bearing A" in note and "bearing B" in note
+    assert magnet_range_note(rig, big, pars) is None          # no bias in the rig file
