@@ -12,6 +12,13 @@ coefficients inside their 90 % intervals (parameters_after).
 
     PYTHONPATH=. python studies/nonlinear_foreign.py --out runs/nonlinear \
         --kinds force_law=3,slew_limit=3,control=2,actuator_lag=2
+
+With ``--levels 0.15,0.3`` each case is recorded at both excitation levels (one machine,
+habits per record), the rig file has no bias, and the records are diagnosed together
+(diagnose_records: the force law across the levels, discrepancy/levels.py):
+
+    PYTHONPATH=. python studies/nonlinear_foreign.py --out runs/nonlinear_levels \
+        --levels 0.15,0.3 --kinds force_law=4,control=3
 """
 
 from __future__ import annotations
@@ -33,11 +40,16 @@ from benchmarks.foreign.benchmark import _controller_file
 BIAS_ERROR = 0.05
 
 
-def with_bias(json_path: Path, i0: float) -> None:
-    """Write the reference rig with its bias current into the record's sidecar."""
+def with_bias(json_path: Path, bias: dict[str, float]) -> None:
+    """Write the reference rig with the bias current of the bearings whose magnets follow
+    the force law into the record's sidecar (a bearing without one is linear)."""
     side = json.loads(json_path.read_text())
     rig = load_rig("reference").to_dict()
-    rig["bearings"]["bias_current"] = i0
+    bt = rig["bearings"]
+    ki, ks = bt.pop("ki"), bt.pop("ks")
+    for b in "AB":
+        bt[b] = {**bt[b], "ki": ki, "ks": ks, **({"bias_current": bias[b]} if b in bias
+                                                 else {})}
     side["rig"] = rig
     json_path.write_text(json.dumps(side, indent=1))
 
@@ -65,15 +77,79 @@ def score(d: Any, truth: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
+def levels_group(kind: str, rng: np.random.Generator, ctrl: Path, out: Path, name: str,
+                 levels: tuple[float, ...]) -> tuple[list[Path], dict[str, Any]]:
+    """One machine (its coefficients, effects and gap drawn once, at the largest level)
+    recorded at each excitation level (eta amplitude, A), habits drawn per record."""
+    from dataclasses import replace
+
+    from benchmarks.foreign.habits import draw_habits
+    spec = draw_case(kind, rng, controller_file=str(ctrl), eta_amplitude_a=max(levels))
+    paths, truth = [], None
+    for i, a in enumerate(levels):
+        h = replace(draw_habits(rng) if i else spec.habits, eta_amplitude_a=a)
+        p = write_case(replace(spec, habits=h), out, f"{name}_l{i}", rng)
+        truth = truth or json.loads(p["truth"].read_text())
+        paths.append(p["csv"])
+    return paths, truth
+
+
+def score_levels(res: Any, truth: dict[str, Any]) -> dict[str, Any]:
+    """The records' force-law block against the truth: named, gap inside, and the
+    small-signal stiffnesses inside their intervals."""
+    fl = res.force_law or {}
+    eff = {e["name"]: e["params"] for e in truth["effects"]}
+    row = {"named": bool(fl.get("named")), "z": fl.get("z"), "line": fl.get("line"),
+           "truth_law": "magnet_force_law" in eff}
+    if fl.get("named") and "magnet_force_law" in eff:
+        g = eff["magnet_force_law"]["gap_m"]
+        lo, hi = fl["gap_hdi90"]
+        row.update(gap=[g, fl["gap_m"], lo, hi], gap_inside=bool(lo <= g <= hi))
+        ins = {n: bool(v["hdi90"][0] <= truth["theta"][n] <= v["hdi90"][1])
+               for n, v in fl["small_signal"].items()}
+        row.update(small_signal_inside=ins, n_inside=sum(ins.values()))
+    row["records_inside"] = [sum(c.hdi90[0] <= truth["theta"][n] <= c.hdi90[1]
+                                 for n, c in d.parameters_after.items())
+                             for d in res.diagnoses]
+    return row
+
+
+def main_levels(a: argparse.Namespace, out: Path, ctrl: Path) -> None:
+    from bayes_amb.api import diagnose as diagnose_any
+    rows_path = out / "levels.jsonl"
+    levels = tuple(float(v) for v in a.levels.split(","))
+    k = 0
+    for item in a.kinds.split(","):
+        kind, n = item.rsplit("=", 1)
+        for i in range(int(n)):
+            k += 1
+            rng = np.random.default_rng(a.seed * 1000 + 500 + k)
+            name = f"lv_{kind}_{i:02d}"
+            paths, truth = levels_group(kind, rng, ctrl, out, name, levels)
+            t0 = time.perf_counter()
+            res = diagnose_any([load_recording(p) for p in paths])
+            row = {"name": name, "kind": kind, **score_levels(res, truth),
+                   "verdicts": res.verdicts, "time_s": time.perf_counter() - t0}
+            with rows_path.open("a") as f:
+                f.write(json.dumps(row) + "\n")
+            print(json.dumps(row), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", required=True)
     ap.add_argument("--kinds", default="force_law=3,slew_limit=3,control=2,actuator_lag=2")
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--levels", default=None,
+                    help="eta amplitudes (A), e.g. 0.15,0.3: each case recorded at every "
+                         "level and diagnosed as several records (no bias in the rig file)")
     a = ap.parse_args()
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
     ctrl = _controller_file(out, 1e-4)
+    if a.levels:
+        main_levels(a, out, ctrl)
+        return
     rows_path = out / "rows.jsonl"
     done = set()
     if rows_path.exists():
@@ -91,8 +167,11 @@ def main() -> None:
             paths = write_case(spec, out, name, rng)
             truth = json.loads(paths["truth"].read_text())
             if "force_law" in kind:
-                i0 = truth["draws"]["magnets"][0]["i0_a"]
-                with_bias(paths["json"], i0 * (1 + rng.uniform(-BIAS_ERROR, BIAS_ERROR)))
+                law = truth["draws"]["magnets"][0]
+                bearings = sorted({ax[0] for ax in law["axes"]})
+                with_bias(paths["json"], {b: law["i0_a"] * (1 + rng.uniform(-BIAS_ERROR,
+                                                                            BIAS_ERROR))
+                                          for b in bearings})
             t0 = time.perf_counter()
             d = diagnose(load_recording(paths["csv"]))
             row = {"name": name, "kind": kind, **score(d, truth),

@@ -30,6 +30,11 @@ none", the records being independent. With the prior odds 1/K each record's sear
 it is named when that joint log posterior odds passes the same threshold. At most
 JOINT_FITS candidates are fitted, the best by that sum, so the search costs a few fits per
 record, and only when the screens point somewhere.
+
+Records at different excitation levels also tell the magnets' force law from a stiffness
+change, which one record cannot: the stiffnesses a linear fit reads rise with the current
+as ks (1 + <(i/i0)^2>), so a regression of the records' stiffness estimates on their levels
+gives the bias i0 and the small-signal stiffnesses (levels.py, the ``force_law`` block).
 """
 
 from __future__ import annotations
@@ -41,6 +46,7 @@ import numpy as np
 
 from bayes_amb.discrepancy.diagnose import DiagnoseOptions, diagnose
 from bayes_amb.discrepancy.fitstats import draws, effect_summaries
+from bayes_amb.discrepancy.levels import force_law_levels
 from bayes_amb.discrepancy.library import make_candidate
 from bayes_amb.discrepancy.library.registry import NOMINAL_FAMILY
 from bayes_amb.discrepancy.select import NODE_FREE, posterior_log_odds, try_candidate
@@ -226,7 +232,8 @@ def diagnose_records(recordings: list[Recording], params: str | tuple[str, ...] 
     prefer_locations(across)
     result = RecordsDiagnosis.from_dict(
         {"recordings": [str(r.source) for r in recordings], "speeds_rpm": speeds,
-         "verdicts": [d.verdict for d in diags], "across": across}, FILE)
+         "verdicts": [d.verdict for d in diags], "across": across,
+         "force_law": force_law_levels(recordings, diags)}, FILE)
     return replace(result, diagnoses=diags)
 
 

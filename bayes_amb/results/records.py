@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from dataclasses import field, replace
 from pathlib import Path
-from typing import Self
+from typing import Any, Self
 
 from bayes_amb.results.blocks import Block, block, omitted, runtime
 from bayes_amb.results.diagnosis import Agreement, Diagnosis
@@ -69,6 +69,7 @@ class RecordsDiagnosis(Block):
     speeds_rpm: list[float] = field(default_factory=list)
     verdicts: list[str]
     across: list[AcrossRow]
+    force_law: dict[str, Any] | None = omitted()
 
     diagnoses: list[Diagnosis] | None = runtime()
 
@@ -82,6 +83,8 @@ class RecordsDiagnosis(Block):
                   + ("; named by the records together" if a.named_jointly else "")
                   + ("; in every record" if a.in_every_record else "")
                   for a in self.across]
+        if self.force_law:
+            lines.append(self.force_law["line"])
         return "\n".join(lines)
 
     def _repr_html_(self) -> str:
@@ -94,7 +97,9 @@ class RecordsDiagnosis(Block):
         across = [[a.effect, ", ".join(map(str, a.named_in)) or "no record alone",
                    "yes" if a.named_jointly else "", "yes" if a.in_every_record else "",
                    a.size.reading if a.size is not None else ""] for a in self.across]
-        return result_html(f"Diagnosis of {len(self.recordings)} records", "", [],
+        line = (self.force_law or {}).get("line", "")
+        return result_html(f"Diagnosis of {len(self.recordings)} records", "",
+                           [line] if line else [],
                            [(["record", "recording", "speed (rpm)", "verdict"], recs),
                             (["effect", "named in records", "named together",
                               "in every record", "size across records"], across)])
