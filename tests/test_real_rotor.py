@@ -154,7 +154,8 @@ def test_each_bearing_its_own_magnet_and_scale():
      r"elements"),
     (lambda d: d["bearings"].update(A={"node": 5, "ki": 1.0, "ks": 1.0,
                                        "magnet": {"gap": 1e-3}}),
-     r"bearings\.A\.magnet: give ki and ks \(and bias_current\) or the magnet's constants, not both"),
+     r"bearings\.A\.magnet: give ki and ks \(and bias_current\) or the magnet.s "
+     r"constants, not both"),
     (lambda d: d["bearings"].update(B={"node": 29, "magnet": {"gap": 1e-3}}),
      r"bearings\.B\.magnet\.bias_current: missing"),
 ])
