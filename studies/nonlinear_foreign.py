@@ -101,10 +101,20 @@ def score_levels(res: Any, truth: dict[str, Any]) -> dict[str, Any]:
     eff = {e["name"]: e["params"] for e in truth["effects"]}
     row = {"named": bool(fl.get("named")), "z": fl.get("z"), "line": fl.get("line"),
            "truth_law": "magnet_force_law" in eff}
-    if fl.get("named") and "magnet_force_law" in eff:
+    law_at = set()
+    if "magnet_force_law" in eff:
+        w = eff["magnet_force_law"]["where"]
+        law_at = {"A", "B"} if w == "all" else {w}
+    row["law_at"] = sorted(law_at)
+    row["named_at"] = fl.get("where", [])
+    row["named_right"] = set(row["named_at"]) == law_at
+    if fl.get("named") and law_at:
         g = eff["magnet_force_law"]["gap_m"]
-        lo, hi = fl["gap_hdi90"]
-        row.update(gap=[g, fl["gap_m"], lo, hi], gap_inside=bool(lo <= g <= hi))
+        row["gap"] = {b: [g, fl["bearings"][b]["gap_m"], *fl["bearings"][b]["gap_hdi90"]]
+                      for b in fl["where"]}
+        row["gap_inside"] = all(lo <= g <= hi for _, _, lo, hi in row["gap"].values()
+                                ) and set(fl["where"]) <= law_at
+    if fl.get("named"):
         ins = {n: bool(v["hdi90"][0] <= truth["theta"][n] <= v["hdi90"][1])
                for n, v in fl["small_signal"].items()}
         row.update(small_signal_inside=ins, n_inside=sum(ins.values()))

@@ -57,6 +57,7 @@ def test_a_force_law_is_named_across_two_levels_and_its_gap_covers(rig):
             ss = fl["small_signal"]["k_Bx"]["hdi90"]
             ss_hits += ss[0] <= theta[2] <= ss[1]
     assert named == n
+    assert fl["where"] == ["A", "B"]
     tol = 3 * np.sqrt(0.9 * 0.1 / n)
     assert abs(hits / n - 0.9) < tol and abs(ss_hits / n - 0.9) < tol
     fl = force_law_levels(recs, _diags(recs, theta, beta, sd, rng))
@@ -74,8 +75,24 @@ def test_linear_magnets_are_not_named_and_bound_the_bias(rig):
         fl = force_law_levels(recs, _diags(recs, theta, 0.0, 0.002, rng))
         named += fl["named"]
     assert named <= stats.binom.ppf(0.999, 300, 1e-3)
-    assert not fl["named"] and fl["bias_lower_bound_a"] > 0
+    assert not fl["named"] and all(fl["bearings"][b]["bias_lower_bound_a"] > 0 for b in "AB")
     assert "bias is above" in fl["line"]
+
+
+def test_a_law_at_one_bearing_is_named_there_only(rig):
+    """Each magnet pair its own bias: a law at B alone is named at B, and A keeps a bound."""
+    g0, sd = 3e-4, 0.002
+    rng = np.random.default_rng(7)
+    recs = _records(rig, (0.1, 0.3), rng)
+    diags = _diags(recs, np.zeros(4), g0 ** -2, sd, rng)
+    for d, r in zip(diags, recs, strict=True):            # undo the law at A
+        m = level_of(r)
+        for n in ("k_Ax", "k_Ay"):
+            d.parameters_after[n].mean += g0 ** -2 * m[0]
+    fl = force_law_levels(recs, diags)
+    assert fl["where"] == ["B"] and "bias_lower_bound_a" in fl["bearings"]["A"]
+    lo, hi = fl["bearings"]["B"]["gap_hdi90"]
+    assert lo <= g0 <= hi
 
 
 def test_one_level_cannot_tell_the_law_from_a_stiffness(rig):

@@ -46,26 +46,29 @@ def level_of(recording: Recording) -> np.ndarray:
 
 def force_law_levels(recordings: list[Recording], diags: list[Diagnosis]
                      ) -> dict[str, Any] | None:
-    """The force law across the records' levels (module docstring), or None when it does
-    not apply: a record failed a data check or modelled a nonlinearity already (the rig
-    file's bias, a limit), or no record reports a bearing stiffness."""
+    """The force law across the records' levels (module docstring), one beta per bearing
+    (each magnet pair its own bias), or None when it does not apply: a record failed a
+    data check or modelled a nonlinearity already (the rig file's bias, a limit), or no
+    record reports a bearing stiffness."""
     if any(d.checks_failed or d.nonlinearity is not None for d in diags):
         return None
     names = sorted({n for d in diags for n in d.parameters_after if n.startswith("k_")})
+    bearings = sorted({n[2] for n in names})
     if not names:
         return None
     m = [level_of(r) for r in recordings]
-    scale = max(float(np.max(v)) for v in m) or 1.0     # beta's column at unit size
+    scale = max(float(np.max(v)) for v in m) or 1.0     # beta's columns at unit size
     m = [v / scale for v in m]
+    nb = len(bearings)
     rows, y, w = [], [], []
     for r, d in enumerate(diags):
         for j, n in enumerate(names):
             c = d.parameters_after.get(n)
             if c is None or not c.sd > 0:
                 continue
-            row = np.zeros(len(names) + 1)
+            row = np.zeros(len(names) + nb)
             row[j] = 1.0
-            row[-1] = -m[r]["AB".index(n[2])]
+            row[len(names) + bearings.index(n[2])] = -m[r]["AB".index(n[2])]
             rows.append(row)
             y.append(c.mean)
             w.append(1.0 / c.sd ** 2)
@@ -74,47 +77,60 @@ def force_law_levels(recordings: list[Recording], diags: list[Diagnosis]
     levels = [float(np.sqrt(np.mean(np.asarray(r.u, dtype=float) ** 2))) for r in recordings]
     base = {"name": FORCE_LAW, "title": TITLES[FORCE_LAW], "records": len(recordings),
             "rms_current_a": levels}
-    spread = max(float(np.ptp([v[b] for v in m])) for b in range(2))
+    spread = min(float(np.ptp([v["AB".index(b)] for v in m])) for b in bearings)
     if spread < 1e-3 or np.linalg.cond(F) > 1e12:
         return {**base, "named": False,
                 "line": "the records' levels do not differ enough to tell the magnets' force "
                         "law from a stiffness change (record at two excitation levels, e.g. "
-                        "half and full)"}
+                        "a third and full)"}
     cov = np.linalg.inv(F)
     est = cov @ (X.T @ (w * y))
-    beta, sd = float(est[-1]) / scale, float(np.sqrt(cov[-1, -1])) / scale
     resid = y - X @ est
     chi2 = float(np.sum(w * resid ** 2))
     dof = max(len(y) - len(est), 1)
-    z = beta / sd
-    z_crit = float(stats.norm.isf(ALPHA))
-    named = bool(z > z_crit)
-    rho = float(np.mean(bias_per_gap(recordings[0].rig)))
-    hi = beta + 1.645 * sd
-    out = {**base, "named": named, "beta_per_m2": beta, "beta_sd": sd, "z": z,
-           "z_crit": z_crit, "chi2": chi2, "dof": dof,
-           "consistency_p": float(stats.chi2.sf(chi2, dof))}
-    if named:
-        lo = max(beta - 1.645 * sd, 0.0)
-        gap = beta ** -0.5
-        gap_hi = lo ** -0.5 if lo > 0 else float("inf")
-        out.update(gap_m=gap, gap_hdi90=[hi ** -0.5, gap_hi], bias_current_a=rho * gap,
-                   bias_hdi90=[rho * hi ** -0.5, rho * gap_hi],
-                   small_signal={n: {"mean": float(est[j]),
-                                     "sd": float(np.sqrt(cov[j, j])),
-                                     "hdi90": [float(est[j] - 1.645 * np.sqrt(cov[j, j])),
-                                               float(est[j] + 1.645 * np.sqrt(cov[j, j]))]}
-                                 for j, n in enumerate(names)})
-        out["line"] = (f"the magnets' force law across the records' levels: the stiffnesses "
-                       f"read rise with the current as ks (1 + <(i/i0)^2>) with a bias of "
-                       f"{rho * gap:.3g} A (90 % {rho * hi ** -0.5:.3g} .. "
-                       f"{rho * gap_hi:.3g} A; gap {1e3 * gap:.3g} mm), z {z:.1f}; the "
-                       "small-signal stiffnesses are in small_signal")
-    else:
-        bound = rho * hi ** -0.5 if hi > 0 else float("inf")
-        out["bias_lower_bound_a"] = bound
-        out["line"] = (f"no force law across the records' levels (z {z:.1f}): the magnets' "
-                       f"bias is above {bound:.3g} A (95 %), so at "
-                       f"{max(levels):.3g} A rms the stiffnesses read are the small-signal "
-                       f"ones within {100 * (max(levels) / bound) ** 2:.2g} %")
+    z_crit = float(stats.norm.isf(ALPHA / nb))
+    rho = bias_per_gap(recordings[0].rig)
+    per, named_where, bounds = {}, [], {}
+    for k, b in enumerate(bearings):
+        i = len(names) + k
+        beta, sd = float(est[i]) / scale, float(np.sqrt(cov[i, i])) / scale
+        r_b = float(np.mean(rho[2 * "AB".index(b):2 * "AB".index(b) + 2]))
+        hi = beta + 1.645 * sd
+        row = {"beta_per_m2": beta, "beta_sd": sd, "z": beta / sd}
+        if beta / sd > z_crit:
+            lo = max(beta - 1.645 * sd, 0.0)
+            gap = beta ** -0.5
+            gap_hi = lo ** -0.5 if lo > 0 else float("inf")
+            row.update(gap_m=gap, gap_hdi90=[hi ** -0.5, gap_hi], bias_current_a=r_b * gap,
+                       bias_hdi90=[r_b * hi ** -0.5, r_b * gap_hi])
+            named_where.append(b)
+        else:
+            bounds[b] = r_b * hi ** -0.5 if hi > 0 else float("inf")
+            row["bias_lower_bound_a"] = bounds[b]
+        per[b] = row
+    out = {**base, "named": bool(named_where), "where": named_where, "bearings": per,
+           "z": max(v["z"] for v in per.values()), "z_crit": z_crit, "chi2": chi2,
+           "dof": dof, "consistency_p": float(stats.chi2.sf(chi2, dof))}
+    if named_where:
+        out["small_signal"] = {n: {"mean": float(est[j]), "sd": float(np.sqrt(cov[j, j])),
+                                   "hdi90": [float(est[j] - 1.645 * np.sqrt(cov[j, j])),
+                                             float(est[j] + 1.645 * np.sqrt(cov[j, j]))]}
+                               for j, n in enumerate(names)}
+    parts = []
+    for b, v in per.items():
+        if b in named_where:
+            lo, hi = v["bias_hdi90"]
+            parts.append(f"bearing {b}: the stiffnesses read rise with the current as "
+                         f"ks (1 + <(i/i0)^2>), bias {v['bias_current_a']:.3g} A (90 % "
+                         f"{lo:.3g} .. {hi:.3g} A; gap {1e3 * v['gap_m']:.3g} mm), z "
+                         f"{v['z']:.1f}")
+        else:
+            parts.append(f"bearing {b}: no force law (z {v['z']:.1f}); its bias is above "
+                         f"{bounds[b]:.3g} A (95 %), so at {max(levels):.3g} A rms its "
+                         "stiffnesses read are the small-signal ones within "
+                         f"{100 * (max(levels) / bounds[b]) ** 2:.2g} %")
+    out["line"] = ("the magnets' force law across the records' levels: " + "; ".join(parts)
+                   + ("; the small-signal stiffnesses are in small_signal" if named_where
+                      else ""))
+    out.update({k: v for k, v in per[named_where[0]].items()} if named_where else {})
     return out
