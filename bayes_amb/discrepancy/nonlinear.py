@@ -147,10 +147,16 @@ def force_law_defect(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float]) -
 
 
 def slew_defect(u: NDArray, rate: float, dt: float) -> NDArray:
-    """The mean current over each sample of a ramp-then-hold amplifier (slew rate ``rate``
-    A/s) driven by the held command u, minus u (N, 4). The ramp starts where the previous
-    sample's ended (at the first command for the first sample). Over a sample whose ramp
-    takes tau <= dt, the mean lags the end value by rate tau^2 / (2 dt)."""
+    """The current a ramp-then-hold amplifier (slew rate ``rate`` A/s) delivers, driven by
+    the held command u, minus u (N, 4), as held samples. The ramp starts where the previous
+    sample's ended (at the first command for the first sample).
+
+    Over a sample the delivered current is its end value (held: the command, or short of
+    it when the ramp takes the whole sample) minus a triangle of height rate tau and length
+    tau (tau <= dt, the ramp's time). The triangle's mean, rate tau^2 / (2 dt), sits at
+    tau / 3 from the sample's start, not at its middle where a held sample sits; so a share
+    delta = 1/2 - tau / (3 dt) of it is held in the sample before, which puts the pulse's
+    first moment where it is (its phase right up to a few hundred Hz)."""
     u = np.asarray(u, dtype=float)
     step = rate * dt
     d = np.zeros_like(u)
@@ -159,18 +165,27 @@ def slew_defect(u: NDArray, rate: float, dt: float) -> NDArray:
         col = u[:, c].tolist()
         out = d[:, c]
         prev = col[0]
+        pulse = [0.0] * len(col)                 # the triangle's mean (signed), per sample
+        share = [0.0] * len(col)                 # delta: its share held a sample earlier
         for k, target in enumerate(col):
             delta = target - prev
-            if -step <= delta <= step:
-                if delta:
-                    tau = abs(delta) / rate
-                    out[k] = -(half * tau * tau if delta > 0 else -half * tau * tau)
-                prev = target
+            if delta == 0:
                 continue
-            end = prev + (step if delta > 0 else -step)
-            mean = end - (half * dt * dt if delta > 0 else -half * dt * dt)
-            out[k] = mean - target
-            prev = end
+            up = delta > 0
+            if -step <= delta <= step:
+                tau = abs(delta) / rate
+                prev = target
+            else:
+                tau = dt
+                prev += step if up else -step
+                out[k] = prev - target           # held short of the command
+            pulse[k] = -(half * tau * tau) if up else half * tau * tau
+            share[k] = 0.5 - tau / (3.0 * dt)
+        for k in range(len(col)):
+            if pulse[k]:
+                out[k] += (1.0 - share[k]) * pulse[k]
+                if k:
+                    out[k - 1] += share[k] * pulse[k]
     return d
 
 
