@@ -123,3 +123,64 @@ def test_plan_warns_when_the_current_leaves_the_magnets_linear_range(rig):
     note = magnet_range_note(biased, big, pars)
     assert note is not None and "bearing A" in note and "bearing B" in note
     assert magnet_range_note(rig, big, pars) is None          # no bias in the rig file
+
+
+@pytest.fixture(scope="module")
+def foreign(tmp_path_factory):
+    """A slew-limited and an effect-free record of the foreign generator (1 s), with their
+    truths (read here only, for scoring)."""
+    import json
+
+    from benchmarks.foreign import draw_case, write_case
+    from benchmarks.foreign.benchmark import _controller_file
+    out = tmp_path_factory.mktemp("nl")
+    ctrl = _controller_file(out, 1e-4)
+    recs = {}
+    for kind, seed in (("slew_limit", 3), ("control", 4)):
+        rng = np.random.default_rng(seed)
+        spec = draw_case(kind, rng, controller_file=str(ctrl), duration_s=1.0)
+        paths = write_case(spec, out, kind, rng)
+        recs[kind] = (paths["csv"], json.loads(paths["truth"].read_text()))
+    return recs
+
+
+def test_the_screen_finds_and_models_a_slew_limit_and_leaves_a_linear_record(foreign):
+    """On a foreign record whose amplifiers are slew-limited the linearity check fails,
+    names the slew limit (not a current limit), and its 90 % interval holds the true rate;
+    on an effect-free one it passes and models nothing."""
+    from bayes_amb.discrepancy.adequacy import nominal_assessment
+    from bayes_amb.discrepancy.library.bearing_coefficient import BEARING_COEFFICIENTS
+    from bayes_amb.io.recording import load_recording
+    path, truth = foreign["slew_limit"]
+    checks, _, _ = nominal_assessment(load_recording(path), BEARING_COEFFICIENTS)
+    lin = next(c for c in checks.checks if c.name == "linearity")
+    assert not lin.ok and lin.values["modelled"] == "slew_limit"
+    rate = next(e["params"]["slew_a_per_s"] for e in truth["effects"])
+    lo, hi = lin.values["nonlinearity"]["interval90"]["all"]
+    assert lo <= rate <= hi and hi / lo < 1.1
+    path, _ = foreign["control"]
+    checks, _, _ = nominal_assessment(load_recording(path), BEARING_COEFFICIENTS)
+    lin = next(c for c in checks.checks if c.name == "linearity")
+    assert lin.ok and lin.values["modelled"] is None
+    assert all(not s["found"] for s in lin.values["screens"])
+
+
+def test_the_rig_files_bias_current_gives_the_force_law(rig):
+    """bearings.bias_current beside ki and ks: read, written back, and the law's gap is
+    i0 ki / ks with a 5 % sd; without it there is no law to model."""
+    from bayes_amb.discrepancy.nonlinear import BIAS_REL_SD, rig_force_law
+    from bayes_amb.errors import BayesAmbError
+    from bayes_amb.rig.rig import rig_from_dict
+    assert rig_force_law(rig) is None
+    d = rig.to_dict()
+    d["bearings"]["bias_current"] = 1.6
+    biased = rig_from_dict(d)
+    assert rig_from_dict(biased.to_dict()) == biased
+    law = rig_force_law(biased)
+    g0 = 1.6 * rig.ki / rig.ks
+    assert law.where == ("A", "B") and law.estimate["A"] == pytest.approx(g0)
+    lo, hi = law.interval90["B"]
+    assert (hi - lo) / 2 == pytest.approx(1.645 * BIAS_REL_SD * g0)
+    d["bearings"]["bias_current"] = -1.0
+    with pytest.raises(BayesAmbError, match="bearings.bias_current"):
+        rig_from_dict(d)
