@@ -182,5 +182,5 @@ def test_the_rig_files_bias_current_gives_the_force_law(rig):
     lo, hi = law.interval90["B"]
     assert (hi - lo) / 2 == pytest.approx(1.645 * BIAS_REL_SD * g0)
     d["bearings"]["bias_current"] = -1.0
-    with pytest.raises(BayesAmbError, match="bearings.bias_current"):
+    with pytest.raises(BayesAmbError, match=r"bearings\.bias_current"):
         rig_from_dict(d)
