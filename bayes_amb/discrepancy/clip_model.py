@@ -31,10 +31,12 @@ from bayes_amb.discrepancy.linearity import (
 )
 from bayes_amb.discrepancy.nonlinear import (
     RIG_FORCE_LAW,
+    SLEW,
     Nonlinearity,
     better_fit,
     rig_force_law,
     screen,
+    slew_defect,
     slew_screen,
 )
 from bayes_amb.inference.offline import dual_youla_eps
@@ -149,6 +151,16 @@ def _parameter_spread(recording: Recording, names: tuple[str, ...],
             pair.append(fit.params if np.isfinite(fit.log_post) else fitted.params)
         half = 0.5 * (pair[1] - pair[0])
         cov += np.outer(half, half)
+    if found.name == SLEW:
+        # the ramp inside the sample is held with its mean and first moment only: the
+        # whole step from the cruder held mean is taken as one sd of what is left out
+        d = slew_defect(checks.u, found.estimate["all"], recording.dt, first_moment=False)
+        fit = fit_nominal(recording, names,
+                          eps - r2_response(fitted.like.forward, fitted.params, d), priors,
+                          seed=seed, start=checks.start)
+        if np.isfinite(fit.log_post):
+            step = fit.params - fitted.params
+            cov += np.outer(step, step)
     return cov
 
 

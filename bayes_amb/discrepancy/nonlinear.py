@@ -146,7 +146,7 @@ def force_law_defect(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float]) -
     return d
 
 
-def slew_defect(u: NDArray, rate: float, dt: float) -> NDArray:
+def slew_defect(u: NDArray, rate: float, dt: float, first_moment: bool = True) -> NDArray:
     """The current a ramp-then-hold amplifier (slew rate ``rate`` A/s) delivers, driven by
     the held command u, minus u (N, 4), as held samples. The ramp starts where the previous
     sample's ended (at the first command for the first sample).
@@ -156,7 +156,9 @@ def slew_defect(u: NDArray, rate: float, dt: float) -> NDArray:
     tau (tau <= dt, the ramp's time). The triangle's mean, rate tau^2 / (2 dt), sits at
     tau / 3 from the sample's start, not at its middle where a held sample sits; so a share
     delta = 1/2 - tau / (3 dt) of it is held in the sample before, which puts the pulse's
-    first moment where it is (its phase right up to a few hundred Hz)."""
+    first moment where it is (its phase right up to a few hundred Hz). first_moment=False
+    holds the whole mean in its own sample (the cruder form: their difference is the
+    scale of what the held form leaves out, slew_form_spread)."""
     u = np.asarray(u, dtype=float)
     step = rate * dt
     d = np.zeros_like(u)
@@ -180,7 +182,7 @@ def slew_defect(u: NDArray, rate: float, dt: float) -> NDArray:
                 prev += step if up else -step
                 out[k] = prev - target           # held short of the command
             pulse[k] = -(half * tau * tau) if up else half * tau * tau
-            share[k] = 0.5 - tau / (3.0 * dt)
+            share[k] = 0.5 - tau / (3.0 * dt) if first_moment else 0.0
         for k in range(len(col)):
             if pulse[k]:
                 out[k] += (1.0 - share[k]) * pulse[k]
