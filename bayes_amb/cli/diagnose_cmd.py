@@ -107,6 +107,12 @@ def format_report(d: Diagnosis) -> str:
                      f"(log BF {e.score:.1f}, {e.confidence}{same})")
     if not d.explanations:
         lines.append("explanation   : none named")
+    nl = d.nonlinearity
+    if nl is not None:
+        ps = "; ".join(f"{loc} {v:.4g} [{nl.hdi90[loc][0]:.4g}, {nl.hdi90[loc][1]:.4g}] "
+                       f"{nl.unit}" for loc, v in nl.estimate.items())
+        lines.append(f"nonlinearity  : {nl.title}" + (f": {nl.parameter} {ps}" if ps else "")
+                     + (f"; {nl.linear_range}" if nl.linear_range else ""))
     lines += [f"stand-in      : {s.line}" for s in d.stand_ins]
     for pl in d.balancing.planes if d.balancing is not None else []:
         u, ph = pl.u_kgm, pl.phase_deg
@@ -204,6 +210,8 @@ def _run_records(args: argparse.Namespace, recs, priors, opt: DiagnoseOptions) -
                      + (f"; size: {row.size.reading}" if row.size else "")
                      + (f"; the records prefer {row.preferred_location} (by "
                         f"{row.weaker_by:.1f} nats)" if row.weaker_by is not None else ""))
+    if r.force_law:
+        lines.append(r.force_law["line"])
     emit(d, "\n".join(lines) + f"\nwrote {args.out}/records.json, {args.out}/records.html "
          f"and {args.out}/record_<i>/", args.json)
     return 0

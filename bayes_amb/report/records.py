@@ -214,10 +214,23 @@ def records_sections(result: Any) -> list[Section]:
                      "evidence): " + ", ".join(jointly) + ".")
     if test:
         lines.append(test["line"][:1].upper() + test["line"][1:] + ".")
+    if result.force_law:
+        fl = result.force_law["line"]
+        lines.append(fl[:1].upper() + fl[1:] + ".")
     doubted = [f"Record {i}: {_final_adequacy(r).line}" for i, r in enumerate(reports, 1)
                if _final_adequacy(r) is not None and not _final_adequacy(r).adequate]
+    tables = [_records_table(result)]
+    small = (result.force_law or {}).get("small_signal")
+    if small:
+        tables.append(Table(
+            "Small-signal stiffnesses (the force law across the records' levels taken out)",
+            ["coefficient", "mean", "90 % interval"],
+            [[n, g(v["mean"], 4), f"[{g(v['hdi90'][0], 4)}, {g(v['hdi90'][1], 4)}]"]
+             for n, v in small.items()],
+            "theta units (relative reduction of ks); the records' stiffnesses read rise "
+            "with their currents, these are the stiffnesses at zero current."))
     summary = Section("summary", "Summary", paragraphs=lines, bullets=doubted,
-                      tables=[_records_table(result)])
+                      tables=tables)
     across = _across_table(result)
     sections = [summary]
     if across is not None:
