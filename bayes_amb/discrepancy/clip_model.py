@@ -104,6 +104,7 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
     raw = nominal.params.copy()
     corrected, nominal = _refit(recording, names, priors, seed, checks, eps, nominal, d)
     shift = nominal.params - raw
+    nominal.modelled_shift = shift
     if found is not None:
         nominal.extra_cov = _parameter_spread(recording, names, priors, seed, checks, eps,
                                               nominal, found)

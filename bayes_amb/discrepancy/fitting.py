@@ -54,6 +54,8 @@ class FittedModel:
     model_error: ModelError | None = None   # the band-wise model error, once assessed
     extra_cov: NDArray | None = None    # (p, p) what the fit modelled but does not know
     #                                     exactly (a modelled clip), added to every interval
+    modelled_shift: NDArray | None = None  # (p,) how far modelling a nonlinearity moved
+    #                                     the parameters (clip_model.take_in_clipping)
     node_range: list[int] | None = None  # a shaft-node force: the nodes as good as its
     #                                     own (select.refine_node)
 

@@ -103,6 +103,43 @@ def _absolute(source: str) -> str:
     return str(p.resolve()) if p.is_file() else source
 
 
+def _with_modelled_law(summary: dict[str, Any], nominal: FittedModel) -> None:
+    """The model is adequate once the rig file's force law is modelled: this likelihood's
+    own intervals (its noise model, its sampling) moved by how far modelling the law moved
+    the adequacy fit's parameters, and widened by the law's own uncertainty (the bias's,
+    nominal.extra_cov), as Gaussians add. The unmoved ones stay under
+    ``parameters_model_only``."""
+    own = summary["parameters"]
+    rig = nominal.forward.recording.rig
+    names = list(nominal.names)
+    moved = {}
+    for n, row in own.items():
+        if n not in names:
+            moved[n] = row
+            continue
+        i = names.index(n)
+        dm = float(nominal.modelled_shift[i])
+        extra = float(np.sqrt(max(nominal.extra_cov[i, i], 0.0)))
+        sd = float(np.hypot(row["sd"], extra))
+        half = [row["mean"] - row["hdi90"][0], row["hdi90"][1] - row["mean"]]
+        grow = [float(np.hypot(h, 1.645 * extra)) for h in half]
+        mean = row["mean"] + dm
+        hdi = [mean - grow[0], mean + grow[1]]
+        scale = get_spec(n).physical_scale(rig)
+        moved[n] = {**row, "mean": mean, "sd": sd, "hdi90": hdi,
+                    **({"map": row["map"] + dm} if "map" in row else {}),
+                    "physical_mean": mean * scale, "physical_sd": sd * abs(scale),
+                    "physical_hdi90": sorted([hdi[0] * scale, hdi[1] * scale])}
+    summary["parameters_model_only"] = own
+    summary["parameters"] = moved
+    summary["parameters_from"] = ("the magnets' force law of the rig file's bias current is "
+                                  "modelled: this likelihood's intervals moved by what "
+                                  "modelling it moved the adequacy's fit, widened by the "
+                                  "bias's uncertainty; the unmoved ones in "
+                                  "parameters_model_only")
+    summary.pop("laplace_cov", None)
+
+
 def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed: int
                       ) -> None:
     """When the model is not adequate (``nominal``: the adequacy's fit, carrying its model
@@ -114,12 +151,13 @@ def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed
     ``parameters_model_only``."""
     if nominal is None:
         return
+    if (nominal.model_error is None and nominal.extra_cov is not None
+            and nominal.modelled_shift is not None):
+        _with_modelled_law(summary, nominal)
+        return
     own = summary["parameters"]
     why = ("the model is not adequate: intervals of the posterior with the band-wise model "
            "error integrated out (see adequacy)" if nominal.model_error is not None else
-           "the magnets' force law of the rig file's bias current is modelled: intervals "
-           "of the adequacy's fit with it (Laplace, with the bias's uncertainty)"
-           if nominal.extra_cov is not None else
            "this likelihood's Laplace approximation failed at its MAP (no negative-definite "
            "curvature): intervals of the adequacy's fit (robust Whittle, Laplace)")
     rig = nominal.forward.recording.rig
