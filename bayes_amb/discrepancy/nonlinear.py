@@ -50,6 +50,12 @@ from scipy import optimize, stats
 
 from bayes_amb.discrepancy.linearity import Regression
 from bayes_amb.rig import CHANNELS, Rig
+from bayes_amb.rig.force_law import (
+    actuator_displacement,
+    bias_per_gap,
+    law_current,
+    rig_gaps,
+)
 
 FORCE_LAW = "magnet_force_law"
 RIG_FORCE_LAW = "rig_force_law"
@@ -76,30 +82,14 @@ GAP_RANGE = (1e-5, 0.05)
 
 
 def model_displacement(rig: Rig, y: NDArray) -> NDArray:
-    """The rotor displacement at the two actuator planes (N, 4: Ax, Ay, Bx, By), from the
-    probes by rigid-body kinematics along the shaft (linear between the sensor planes)."""
-    z = rig.shaft.node_z
-    zs = {b: z[rig.sensor_nodes[b] - 1] for b in "AB"}
-    zb = {b: z[rig.bearing_nodes[b] - 1] for b in "AB"}
-    span = zs["B"] - zs["A"]
-    y = np.asarray(y, dtype=float)
-    out = np.empty_like(y)
-    for k in range(2):                               # x, y axes
-        ya, yb = y[:, k], y[:, 2 + k]
-        for j, b in enumerate("AB"):
-            w = (zb[b] - zs["A"]) / span if span else float(j)
-            out[:, 2 * j + k] = (1.0 - w) * ya + w * yb
-    return out
+    """The rotor displacement at the two actuator planes (N, 4), from the probes by
+    rigid-body kinematics along the shaft (rig.force_law.actuator_displacement)."""
+    return actuator_displacement(rig, y)
 
 
 def centred(v: NDArray) -> NDArray:
     v = np.asarray(v, dtype=float)
     return v - np.median(v, axis=0)
-
-
-def bias_per_gap(rig: Rig) -> NDArray:
-    """ks / ki per channel (A/m): the bias current over the gap of a consistent magnet."""
-    return np.array([m.ks / m.ki for m in rig.channel_magnets])
 
 
 def nonlinear_part(d: NDArray, u: NDArray, x: NDArray) -> NDArray:
@@ -130,20 +120,9 @@ def force_law_regressors(rig: Rig, u: NDArray, x: NDArray) -> dict[str, NDArray]
 
 def force_law_defect(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float]) -> NDArray:
     """d = (f - ki i - ks x) / ki (N, 4) of the exact differential law, per bearing gap
-    (m; a bearing not in ``gaps`` is linear). Where |x| reaches the gap the defect is that
-    of 0.99 of the gap (the rotor on its catcher bearing is not this law's business)."""
-    u, x, rho = centred(u), centred(x), bias_per_gap(rig)
-    d = np.zeros_like(u)
-    for j, b in enumerate("AB"):
-        if b not in gaps:
-            continue
-        sl = slice(2 * j, 2 * j + 2)
-        g0 = float(gaps[b])
-        i0 = rho[sl] * g0
-        io, xi = u[:, sl] / i0, np.clip(x[:, sl] / g0, -0.99, 0.99)
-        law = (1 + io) ** 2 / (1 - xi) ** 2 - (1 - io) ** 2 / (1 + xi) ** 2
-        d[:, sl] = i0 / 4.0 * (law - 4 * io - 4 * xi)
-    return d
+    (m; a bearing not in ``gaps`` is linear), for the record's currents and displacements
+    about their medians (rig.force_law.law_current)."""
+    return law_current(rig, centred(u), centred(x), gaps)
 
 
 def slew_defect(u: NDArray, rate: float, dt: float, first_moment: bool = True) -> NDArray:
@@ -268,17 +247,13 @@ setting and the gap's machining tolerance)."""
 
 
 def rig_force_law(rig: Rig) -> Nonlinearity | None:
-    """The magnets' force law at the rig file's bias currents (the gap i0 ki / ks), with
-    BIAS_REL_SD as its uncertainty; None when no bearing gives its bias. One record at one
-    excitation level cannot tell this law from a stiffness change (its mean part is one,
-    and the rest, spread over the whole band by a random binary excitation, hardly moves
-    the rotor), so where the rig file knows the bias the law is modelled from it."""
-    gaps, where = {}, []
-    for b in "AB":
-        m = rig.magnets[b]
-        if m.bias_current:
-            gaps[b] = m.bias_current * m.ki / m.ks
-            where.append(b)
+    """The magnets' force law at the bias currents the rig file states (rig.force_law.
+    rig_gaps), with BIAS_REL_SD as its uncertainty; None when it states none. One record
+    at one excitation level cannot tell this law from a stiffness change (its mean part is
+    one, and the rest, spread over the whole band by a random binary excitation, hardly
+    moves the rotor), so where the rig file knows the bias the law is modelled from it."""
+    gaps = rig_gaps(rig)
+    where = sorted(gaps)
     if not gaps:
         return None
     k = 1.645 * BIAS_REL_SD

@@ -19,6 +19,7 @@ x[k+1] = Ad x[k] + Gamma(dt - phi) u[k-m] + e^{A(dt-phi)} Gamma(phi) u[k-m-1].
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -103,13 +104,17 @@ def closed_loop_spectral_radius(truth: TruthPlant,
 def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray, NDArray],
                   dt: float, eta: NDArray, noise: NDArray | None = None,
                   r1: NDArray | None = None, r2: NDArray | None = None,
-                  port: str = "eta") -> LoopSignals:
+                  port: str = "eta", law: Callable[[NDArray, NDArray], NDArray] | None = None
+                  ) -> LoopSignals:
     """Run the loop for len(eta) samples from rest. controller = (Ak, Bk, Ck, Dk) with
     inputs [y (4); eta (4)] and outputs [u (4); eps (4)].
 
     port: where the excitation ``eta`` (n, 4) enters: ``"eta"``, the controller's eta
     port; ``"r2"``, added to the controller's output current (the eta port stays zero).
     Either way the recorded u includes what the excitation adds to the plant current.
+    law: the magnets' force law as a current d(u_plant, y) (4,) added to the plant's input
+    on each sample (rig.force_law.law_current at the rig file's bias), from the plant
+    current and the noise-free probe signal of that sample; None: linear magnets.
     """
     if port not in ("eta", "r2"):
         raise ValueError(f"port: expected 'eta' or 'r2' instead of {port!r}")
@@ -156,6 +161,8 @@ def simulate_loop(truth: TruthPlant, controller: tuple[NDArray, NDArray, NDArray
         u_rec[k] = out[:4] + e2[k]
         eps[k] = out[4:]
         u_hist[k + off] = u_rec[k] + r2[k]
+        if law is not None:
+            u_hist[k + off] += law(u_hist[k + off], y - noise[k])
         x = Ad @ x + G_now @ u_hist[k + off - m_del] + G_prev @ u_hist[k + off - m_del - 1] \
             + force_term[k]
         if k % 256 == 0 and not np.all(np.isfinite(x)):

@@ -16,6 +16,7 @@ from bayes_amb.errors import BayesAmbError
 from bayes_amb.io.controller_file import ControllerFile, check_fits_rig
 from bayes_amb.io.recording import Recording, make_recording
 from bayes_amb.rig import CHANNELS, Rig, check_speed_rpm
+from bayes_amb.rig.force_law import actuator_displacement, law_current, rig_gaps
 from bayes_amb.simulate.effects import Effect
 from bayes_amb.simulate.loop import simulate_loop
 from bayes_amb.simulate.signals import excitation, gaussian_noise
@@ -149,8 +150,13 @@ def simulate_recording(rig: Rig, controller: ControllerFile, config: SimulationC
     r1 = gaussian_noise(n, 4, config.r1_rms, streams[2], config.dt, config.r1_band_hz)
     r2 = gaussian_noise(n, 4, config.r2_rms, streams[3], config.dt, config.r2_band_hz)
     truth_plant = build_truth(rig, speed, config.truth, config.params, config.effects)
+    gaps = rig_gaps(rig)
+    law = None
+    if gaps:
+        def law(u: np.ndarray, y: np.ndarray) -> np.ndarray:
+            return law_current(rig, u, actuator_displacement(rig, y), gaps)[0]
     sig = simulate_loop(truth_plant, (controller.A, controller.B, controller.C, controller.D),
-                        config.dt, exc, noise=noise, r1=r1, r2=r2, port=port)
+                        config.dt, exc, noise=noise, r1=r1, r2=r2, port=port, law=law)
     if sig.unstable:
         raise BayesAmbError("simulation: the closed loop is unstable for this truth "
                             f"(params {config.params}, effects "
