@@ -10,12 +10,12 @@ import pytest
 from bayes_amb.discrepancy.nonlinear import (
     force_law_defect,
     force_law_regressors,
-    model_displacement,
     nonlinear_part,
     slew_defect,
 )
 from bayes_amb.planning.plan import magnet_range_note
 from bayes_amb.rig import load_rig
+from bayes_amb.rig.force_law import actuator_displacement
 
 
 @pytest.fixture(scope="module")
@@ -94,13 +94,13 @@ def test_slew_defect_limits_the_rate_and_vanishes_for_a_fast_amplifier():
     assert db.sum() * dt == pytest.approx(-0.5 * (0.5 / rate) / 2, rel=1e-12)
 
 
-def test_model_displacement_is_rigid_body_kinematics(rig):
+def test_actuator_displacement_is_rigid_body_kinematics(rig):
     """At the sensor planes it returns the probes; a tilt is interpolated linearly."""
     z = rig.shaft.node_z
     za, zb = z[rig.sensor_nodes["A"] - 1], z[rig.sensor_nodes["B"] - 1]
     ba, bb = z[rig.bearing_nodes["A"] - 1], z[rig.bearing_nodes["B"] - 1]
     y = np.array([[1.0, 2.0, 3.0, 5.0]])                      # Ax, Ay, Bx, By
-    q = model_displacement(rig, y)
+    q = actuator_displacement(rig, y)
     slope_x, slope_y = (3.0 - 1.0) / (zb - za), (5.0 - 2.0) / (zb - za)
     np.testing.assert_allclose(q[0], [1 + slope_x * (ba - za), 2 + slope_y * (ba - za),
                                       1 + slope_x * (bb - za), 2 + slope_y * (bb - za)])

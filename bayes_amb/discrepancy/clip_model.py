@@ -59,13 +59,6 @@ class TakenIn:
     shift: np.ndarray | None
     screened: tuple[Nonlinearity, ...] = ()
 
-    @property
-    def nonlinearity(self) -> Nonlinearity | None:
-        """The force law or slew limit modelled (found in the record, or the force law
-        the rig file's bias gives), if any."""
-        return self.screened[0] if self.modelled in (*(n.name for n in self.screened),
-                                                      RIG_FORCE_LAW) else None
-
 
 def take_in_clipping(recording: Recording, names: tuple[str, ...],
                      priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
@@ -89,7 +82,7 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
                 ds = slew.defect(recording.rig, checks.u, checks.y, recording.dt)
                 if better_fit(reg, ds, d):
                     clip, found, screened, d = None, slew, (slew,), ds
-        elif found is None:
+        else:
             screened = tuple(screen(nominal.like, nominal.params, nominal.log10_sigma,
                                     checks.u, checks.y, recording.rig, reg=reg))
             if screened[0].found:
@@ -125,12 +118,25 @@ def _refit(recording: Recording, names: tuple[str, ...], priors: dict[str, Prior
     corrected = eps
     for _ in range(2):
         corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
-        refit = fit_nominal(recording, names, corrected, priors, seed=seed,
-                            start=checks.start)
+        refit = _fit_taking_out(recording, names, priors, seed, checks, eps, nominal, d)
         if not np.isfinite(refit.log_post):
             break
         nominal = refit
     return corrected, nominal
+
+
+def _fit_taking_out(recording: Recording, names: tuple[str, ...],
+                    priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
+                    eps: np.ndarray, at: FittedModel, d: np.ndarray) -> FittedModel:
+    """The nominal fit on eps - T_r2 d, with T_r2 the r2 -> eps filter of the fit ``at``:
+    the refit every modelled nonlinearity and every spread of its parameter makes."""
+    return fit_nominal(recording, names, eps - r2_response(at.like.forward, at.params, d),
+                       priors, seed=seed, start=checks.start)
+
+
+def _params_of(fit: FittedModel, fallback: FittedModel) -> np.ndarray:
+    """A refit's parameters, or the fallback's where it found no finite likelihood."""
+    return fit.params if np.isfinite(fit.log_post) else fallback.params
 
 
 def _parameter_spread(recording: Recording, names: tuple[str, ...],
@@ -143,25 +149,19 @@ def _parameter_spread(recording: Recording, names: tuple[str, ...],
     cov = np.zeros((fitted.params.size, fitted.params.size))
     ends = found.ends()
     for lo, hi in zip(ends[::2], ends[1::2], strict=True):
-        pair = []
-        for at in (lo, hi):
-            d = found.defect(recording.rig, checks.u, checks.y, recording.dt, at=at)
-            fit = fit_nominal(recording, names,
-                              eps - r2_response(fitted.like.forward, fitted.params, d),
-                              priors, seed=seed, start=checks.start)
-            pair.append(fit.params if np.isfinite(fit.log_post) else fitted.params)
+        pair = [_params_of(_fit_taking_out(
+            recording, names, priors, seed, checks, eps, fitted,
+            found.defect(recording.rig, checks.u, checks.y, recording.dt, at=at)), fitted)
+            for at in (lo, hi)]
         half = 0.5 * (pair[1] - pair[0])
         cov += np.outer(half, half)
     if found.name == SLEW:
         # the ramp inside the sample is held with its mean and first moment only: the
         # whole step from the cruder held mean is taken as one sd of what is left out
         d = slew_defect(checks.u, found.estimate["all"], recording.dt, first_moment=False)
-        fit = fit_nominal(recording, names,
-                          eps - r2_response(fitted.like.forward, fitted.params, d), priors,
-                          seed=seed, start=checks.start)
-        if np.isfinite(fit.log_post):
-            step = fit.params - fitted.params
-            cov += np.outer(step, step)
+        step = _params_of(_fit_taking_out(recording, names, priors, seed, checks, eps,
+                                          fitted, d), fitted) - fitted.params
+        cov += np.outer(step, step)
     return cov
 
 
@@ -175,10 +175,8 @@ def _limit_spread(recording: Recording, names: tuple[str, ...],
     for sign in (1.0, -1.0):
         d = clip_defect(checks.u, clip.limit_a * (1.0 + sign * LIMIT_SD),
                         np.array(clip.centre_a))
-        fit = fit_nominal(recording, names,
-                          eps - r2_response(fitted.like.forward, fitted.params, d), priors,
-                          seed=seed, start=checks.start)
-        ends.append(fit.params if np.isfinite(fit.log_post) else fitted.params)
+        ends.append(_params_of(_fit_taking_out(recording, names, priors, seed, checks, eps,
+                                               fitted, d), fitted))
     half = 0.5 * (ends[0] - ends[1])
     return np.outer(half, half)
 

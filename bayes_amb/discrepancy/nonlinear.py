@@ -15,10 +15,11 @@ magnet force law   A differential pair with bias current i0 and air gap g0 pulls
                    gap g0; the bias follows) fixes the law. The force beyond ki i + ks x,
                    divided by ki, is the current defect d = N(u, x; g0) / ki, x the rotor
                    displacement at the actuator (from the probes by rigid-body kinematics
-                   along the shaft, model_displacement). To third order d = beta h with
-                   h = x u^2 / rho + 3 u x^2 + 2 rho x^3, rho = ks / ki and beta = 1 / g0^2:
-                   linear in beta, so the screen is a regression of the whitened residual
-                   on T_r2 h (one column per bearing) beside the coefficients' Jacobian.
+                   along the shaft, rig.force_law.actuator_displacement). To third order
+                   d = beta h with h = x u^2 / rho + 3 u x^2 + 2 rho x^3, rho = ks / ki
+                   and beta = 1 / g0^2: linear in beta, so the screen is a regression of
+                   the whitened residual on T_r2 h (one column per bearing) beside the
+                   coefficients' Jacobian.
                    The mean of u^2 times x is a stiffness (a linear fit absorbs it: ks
                    looks (1 + <(u/i0)^2>) times larger); the rest is not linear and names
                    the law.
@@ -49,7 +50,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from bayes_amb.discrepancy.linearity import Regression
-from bayes_amb.rig import CHANNELS, Rig
+from bayes_amb.rig import Rig
 from bayes_amb.rig.force_law import (
     actuator_displacement,
     bias_per_gap,
@@ -79,12 +80,6 @@ three foreign slew records the estimates were off by -0.2 .. +0.1 %, against pro
 intervals of +-0.1 %."""
 GAP_RANGE = (1e-5, 0.05)
 """Gaps (m) the force law's profile searches: 10 um .. 50 mm."""
-
-
-def model_displacement(rig: Rig, y: NDArray) -> NDArray:
-    """The rotor displacement at the two actuator planes (N, 4), from the probes by
-    rigid-body kinematics along the shaft (rig.force_law.actuator_displacement)."""
-    return actuator_displacement(rig, y)
 
 
 def centred(v: NDArray) -> NDArray:
@@ -137,7 +132,7 @@ def slew_defect(u: NDArray, rate: float, dt: float, first_moment: bool = True) -
     delta = 1/2 - tau / (3 dt) of it is held in the sample before, which puts the pulse's
     first moment where it is (its phase right up to a few hundred Hz). first_moment=False
     holds the whole mean in its own sample (the cruder form: their difference is the
-    scale of what the held form leaves out, slew_form_spread)."""
+    scale of what the held form leaves out, clip_model._parameter_spread)."""
     u = np.asarray(u, dtype=float)
     step = rate * dt
     d = np.zeros_like(u)
@@ -203,7 +198,7 @@ class Nonlinearity:
         """The current defect d (N, 4) at the estimate (or at ``at``)."""
         v = self.estimate if at is None else at
         if self.name == FORCE_LAW:
-            return force_law_defect(rig, u, model_displacement(rig, y), v)
+            return force_law_defect(rig, u, actuator_displacement(rig, y), v)
         return slew_defect(u, v["all"], dt)
 
     def ends(self) -> list[dict[str, float]]:
@@ -268,8 +263,9 @@ def _rss_fn(reg: Regression, wt: NDArray) -> Callable[[NDArray], float]:
     coefficients free (their Jacobian projected out) and fixed band weights."""
     Q, _ = np.linalg.qr(reg.J * wt[:, None])
 
-    def rss(bins: NDArray) -> float:
-        r = (reg.y - reg.rows(bins)) * wt
+    def rss(bins: NDArray | None) -> float:
+        """None: no defect taken out (the linear model's own sum)."""
+        r = (reg.y if bins is None else reg.y - reg.rows(bins)) * wt
         return float(np.sum((r - Q @ (Q.T @ r)) ** 2))
     return rss
 
@@ -302,7 +298,7 @@ def _interval(f: Callable[[float], float], best: float, lo: float, hi: float,
 def force_law_screen(reg: Regression, rig: Rig, u: NDArray, y: NDArray) -> Nonlinearity:
     """The force-law regression (module docstring): z per bearing, and where found the
     gap profiled with the exact law."""
-    x = model_displacement(rig, y)
+    x = actuator_displacement(rig, y)
     hs = force_law_regressors(rig, u, x)
     scale = {b: 1.0 / max(float(np.sqrt(np.mean(hs[b] ** 2))), 1e-300) for b in "AB"}
     hs = {b: hs[b] * scale[b] for b in "AB"}            # unit rms: a conditioned regression
@@ -329,7 +325,7 @@ def force_law_screen(reg: Regression, rig: Rig, u: NDArray, y: NDArray) -> Nonli
         return Nonlinearity(FORCE_LAW, False, **common)
     rss = _rss_fn(reg, wt)
     gaps = {c: float((b["AB".index(c)] * scale[c]) ** -0.5) for c in hit}
-    rss_lin = rss(np.zeros_like(reg.defect_dft(hs["A"])))
+    rss_lin = rss(None)
     uc, xc = centred(u), centred(x)
 
     def total(g: dict[str, float]) -> float:
@@ -387,7 +383,7 @@ def slew_screen(reg: Regression, u: NDArray, dt: float) -> Nonlinearity:
     rate = float(np.exp(_argmin_log(lambda lr: f(float(np.exp(lr))),
                                     0.5 * np.log(lo * hi), 0.5 * np.log(hi / lo) + 0.1)))
     rss0 = f(rate)
-    rss_lin = rss(np.zeros_like(reg.defect_dft(np.zeros_like(u))))
+    rss_lin = rss(None)
     lo90, hi90 = _interval(f, rate, rate / 2.0, rate * 2.0, rss0)
     floor = 1.645 * SLEW_REL_SD * rate
     interval = (min(lo90, rate - floor), max(hi90, rate + floor))
@@ -412,9 +408,4 @@ def screen(like, params: NDArray, log10_sigma: NDArray, u: NDArray, y: NDArray,
     reg = reg or Regression(like, params, log10_sigma, u)
     out = [force_law_screen(reg, rig, u, y), slew_screen(reg, u, like.forward.dt)]
     return sorted(out, key=lambda n: (not n.found, -n.rss_drop))
-
-
-__all__ = ["CHANNELS", "FORCE_LAW", "SLEW", "Nonlinearity", "force_law_defect",
-           "force_law_regressors", "force_law_screen", "model_displacement", "screen",
-           "slew_defect", "slew_screen"]
 
