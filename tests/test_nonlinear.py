@@ -123,6 +123,9 @@ def test_plan_warns_when_the_current_leaves_the_magnets_linear_range(rig):
     note = magnet_range_note(biased, big, pars)
     assert note is not None and "bearing A" in note and "bearing B" in note
     assert magnet_range_note(rig, big, pars) is None          # no bias in the rig file
+    stated = dataclasses.replace(rig, magnets={                # bias_current beside ki, ks
+        b: Magnet(m.ki, m.ks, bias=1.6) for b in "AB"})
+    assert magnet_range_note(stated, big, pars) == note
 
 
 @pytest.fixture(scope="module")

@@ -304,7 +304,7 @@ def magnet_range_note(rig: Rig, u: NDArray, pars: dict[str, dict[str, Any]]) -> 
     u = u - np.median(u, axis=0)
     out = []
     for j, b in enumerate("AB"):
-        i0 = dict(rig.magnets[b].constants).get("bias_current")
+        i0 = rig.magnets[b].bias_current
         hw = [1.645 * v["sd"] for n, v in pars.items() if n.startswith(f"k_{b}")]
         if not i0 or not hw:
             continue
