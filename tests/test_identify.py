@@ -118,6 +118,22 @@ def test_paper_case_on_the_full_truth_has_a_small_bias(rig, observer_1ms, noise_
         assert not adq.adequate and adq.line.startswith("model NOT adequate"), adq
 
 
+def test_a_model_that_is_not_adequate_is_not_sampled(rig, observer_1ms):
+    """The paper's case on the noise-free full truth (the 8-state model misses the flexible
+    modes inside the band at 1 ms): identify's default (sampled) reports the model-error
+    intervals of the adequacy's fit, which a sample of its own likelihood would not change,
+    so it does not sample (minutes on a doubted model) and says so; its own Laplace
+    intervals stay under parameters_model_only."""
+    cfg = SimulationConfig(truth="full", params={"k_By": 0.5}, dt=observer_1ms.dt,
+                           duration=0.5, seed=1)
+    rec, _ = simulate_recording(rig, observer_1ms, cfg)
+    res = identify(rec, "k_By", options=IdentifyOptions(steps=200))
+    assert not res.adequacy.adequate
+    assert res.sampler is None and res.posterior is None
+    assert res.inference_note.startswith("not sampled: the model is not adequate")
+    assert res.parameters_model_only is not None
+
+
 # ------------------------------------------------------- several parameters with noise
 TRUTH3 = {"k_By": 0.3, "c_By": -0.2, "k_Ax": 0.1}
 

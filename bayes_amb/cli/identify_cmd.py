@@ -53,6 +53,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="fit the transient of the record's start, or not (default: fitted "
                    "when the data check finds that the record starts mid-operation, as a "
                    "rig's records do)")
+    p.add_argument("--white-noise", action="store_true",
+                   help="keep the three white noise sources (the noise check's sandwich "
+                   "where the record's noise is not white) instead of learning the noise "
+                   "spectrum from the record (default: learned where the residual is not "
+                   "white)")
     p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs",
                    help="MAP optimiser, one of lbfgs (L-BFGS-B, multi-start), nelder-mead "
                    "(the paper's fminsearch) (default lbfgs)")
@@ -103,8 +108,11 @@ def format_summary(s: Identification) -> str:
                                                   for k, v in s.noise.map.items()))
     for note in (s.identifiability or {}).get("notes", []):
         lines.append(f"warning: {note}")
-    if s.noise is not None and s.noise.check is not None and s.noise.check.doubted:
-        lines.append(f"noise: {s.noise.check.line}")
+    if s.noise is not None and s.noise.spectrum is not None:
+        lines.append(s.noise.spectrum.line)
+    check = s.noise.check if s.noise is not None else None
+    if check is not None and (check.doubted or check.sd_ratio):
+        lines.append(f"noise: {check.line}")
     if s.adequacy is not None:
         lines.append(f"adequacy: {s.adequacy.line}")
     return "\n".join(lines)
@@ -149,7 +157,8 @@ def _run_joint(args: argparse.Namespace, priors) -> int:
         result = identify_joint(recs, args.params, priors, IdentifyOptions(
             walkers=args.walkers, steps=args.steps, map_only=args.map_only,
             map_method=args.map_method, seed=args.seed, progress=update,
-            initial_state=args.initial_state), per_record=per)
+            initial_state=args.initial_state, learn_spectrum=not args.white_noise),
+            per_record=per)
     finally:
         if bar is not None:
             bar.close()
@@ -176,7 +185,7 @@ def run(args: argparse.Namespace) -> int:
         result = identify(rec, args.params, priors, IdentifyOptions(
             walkers=args.walkers, steps=args.steps, map_only=args.map_only,
             map_method=args.map_method, seed=args.seed, progress=update,
-            initial_state=args.initial_state))
+            initial_state=args.initial_state, learn_spectrum=not args.white_noise))
     finally:
         if bar is not None:
             bar.close()

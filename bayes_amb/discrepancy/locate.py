@@ -318,14 +318,20 @@ def _alias(f: float, fs: float) -> float:
     return min(r, fs - r)
 
 
-def _windows(e: NDArray, n_windows: int, dt: float) -> tuple[NDArray, list[float] | None]:
+def _windows(e: NDArray, n_windows: int, dt: float, skip: int = 0
+             ) -> tuple[NDArray, list[float] | None]:
+    """Bartlett's test of the residual's variance over n_windows time windows after the
+    first ``skip`` samples (the prewhitening FIR filling up: its output's variance grows
+    over its length, which is no model error), and the worst window [t0, t1] (s)."""
+    skip = min(int(skip), e.shape[0] // 2)
+    e = e[skip:]
     n = e.shape[0] // n_windows * n_windows
     parts = e[:n].reshape(n_windows, -1, e.shape[1])
     p = np.array([stats.bartlett(*parts[:, :, c]).pvalue for c in range(e.shape[1])])
     v = np.var(parts, axis=1)                                   # (n_windows, 4)
     worst = int(np.argmax(np.max(np.abs(np.log(v / np.median(v, axis=0))), axis=1)))
     seg = n // n_windows
-    return p, [worst * seg * dt, (worst + 1) * seg * dt]
+    return p, [(skip + worst * seg) * dt, (skip + (worst + 1) * seg) * dt]
 
 
 def _ppc(like: RobustWhittle, P_hat: NDArray, cov: NDArray | None, L: NDArray,
@@ -393,7 +399,7 @@ def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
     ac, lb_p = ljung_box(e, opt.lb_lags)
     e_flat = whitened_series(flatten(W_clean), like.k, like.n)
     xc, xc_p = _xcorr(e_flat, flat_series(like.x_window), opt.xcorr_lags)
-    win_p, window = _windows(e_flat, opt.n_windows, like.forward.dt)
+    win_p, window = _windows(e_flat, opt.n_windows, like.forward.dt, like.prefilter.size - 1)
     adj_f = _holm_families({"coherence": coh_p.ravel(), "crosscorr": xc_p.ravel(),
                             "lines": np.array([line_p]), "windows": win_p})
     adj_f.update(_holm_families({"floor": floor_p, "whiteness": lb_p}))

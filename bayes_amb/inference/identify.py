@@ -21,8 +21,7 @@ import numpy as np
 from scipy import stats
 
 from bayes_amb import __version__
-from bayes_amb.discrepancy.adequacy import assess_fit, loop_poles
-from bayes_amb.discrepancy.checks import start_state
+from bayes_amb.discrepancy.adequacy import assess_fit
 from bayes_amb.discrepancy.fitstats import draws, theta_summary
 from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.errors import BayesAmbError
@@ -42,7 +41,14 @@ from bayes_amb.inference.estimate import (
     laplace_covariance,
 )
 from bayes_amb.inference.forward import ForwardModel
-from bayes_amb.inference.noise_check import CHAIN_KEYS, noise_check, sandwich_rows
+from bayes_amb.inference.noise_check import (
+    CHAIN_KEYS,
+    NoiseCheck,
+    noise_check,
+    robust_check,
+    sandwich_rows,
+)
+from bayes_amb.inference.noise_fit import fit_noise_spectrum
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.posterior import (
     approximate_row,
@@ -59,6 +65,8 @@ from bayes_amb.inference.sampler import (
     run_emcee,
     sampler_block,
 )
+from bayes_amb.inference.spectrum import LearnedSpectrum
+from bayes_amb.inference.start import start_transient, transient_kept
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.results.identification import FILE, Identification
@@ -82,7 +90,9 @@ mixed with independence proposals from the Laplace approximation at the MAP, the
 "de": differential evolution alone, the sampler before issue 16, kept for comparison),
 initial_state (fit the transient of the record's start, WhittleLikelihood.set_initial_state:
 True or False; None, the default, fits it when the data check finds that the record starts
-mid-operation, as a rig's records do: start_transient)."""
+mid-operation, as a rig's records do: start_transient), learn_spectrum (learn the noise
+spectrum from the record, inference/spectrum.py, the default; False: the three white
+sources, with the noise check's sandwich where the record's noise is not white)."""
 
     walkers: int | None = None
     steps: int | None = None
@@ -95,6 +105,7 @@ mid-operation, as a rig's records do: start_transient)."""
     moves: str = "laplace"
     adequacy: bool = True
     initial_state: bool | None = None
+    learn_spectrum: bool = True
 
 
 def _absolute(source: str) -> str:
@@ -171,6 +182,52 @@ def _with_model_error(summary: dict[str, Any], nominal: FittedModel | None, seed
         for n, w in widened.items() if n in own}
     summary["parameters_from"] = why + "; this likelihood's own in parameters_model_only"
     summary.pop("laplace_cov", None)     # the correlations of the model-only posterior
+    _say_prior_wide(summary, nominal)
+
+
+PRIOR_WIDE = 0.9
+"""Share of the prior's sd above which a model-error interval is said to be the prior's."""
+
+
+def _say_prior_wide(summary: dict[str, Any], nominal: FittedModel) -> None:
+    """Where the model error left a coefficient nothing of the record's information (its
+    sd at least PRIOR_WIDE of the prior's), the identifiability notes say so: the prior's
+    interval as a last resort, stated, never a silent default."""
+    priors = dict(zip(nominal.post.priors.names, nominal.post.priors.priors, strict=True))
+    said = {t.split(" ")[0] for t in summary.get("identifiability", {}).get("notes", [])}
+    wide = [n for n, row in summary["parameters"].items()
+            if n in priors and n not in said and np.isfinite(priors[n].sd)
+            and row["sd"] >= PRIOR_WIDE * priors[n].sd]
+    if not wide:
+        return
+    ident = summary.setdefault("identifiability", {"identifiable": True, "notes": []})
+    ident["identifiable"] = False
+    ident["prior_wide"] = wide
+    ident["notes"] = [*ident.get("notes", []),
+                      *(f"{n} is not identified here: the model is not adequate where the "
+                        "record informs it, and the model error integrated out leaves "
+                        "nothing of that information, so its interval is the prior's (a "
+                        "last resort; this likelihood's own, which assumes the model right, "
+                        "is under parameters_model_only). Run diagnose to name and model "
+                        "what is missing" for n in wide)]
+
+
+def _within_band(verdict: Any, nominal: FittedModel, f_max_hz: float) -> Any:
+    """The adequacy for identify's likelihood, which uses the bins up to f_max_hz only (the
+    reduced model's validity band): where the whole-band test found structure only above
+    it (flexible modes the reduced model leaves out by design) and no data check failed,
+    the model is adequate for identify, and its own intervals stand (the model error of
+    the whole-band fit would widen them for bands this likelihood does not use)."""
+    if (verdict.adequate or verdict.failed or verdict.nonlinear or not verdict.bands_hz
+            or min(lo for lo, _ in verdict.bands_hz) <= f_max_hz):
+        return verdict
+    nominal.model_error = None
+    spans = ", ".join(f"{lo:.0f}-{hi:.0f} Hz" for lo, hi in verdict.bands_hz[:3])
+    return replace(verdict, adequate=True, line=(
+        f"model adequate in identify's band (up to {f_max_hz:.0f} Hz, the reduced model's "
+        f"validity band): the residual keeps structure only above it, at {spans} on "
+        f"{','.join(verdict.channels)}, where the reduced model is not meant to hold "
+        "(`bayes-amb diagnose` looks there)"))
 
 
 def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | None,
@@ -233,6 +290,24 @@ def _from_nominal_too(post: LogPosterior, m: MapResult, method: str) -> MapResul
     return m
 
 
+def learned_noise(post: LogPosterior, m: MapResult, method: str
+                  ) -> tuple[MapResult, LearnedSpectrum | None]:
+    """The noise spectrum learned from the record at the white model's MAP m and the MAP
+    under it (noise_fit.fit_noise_spectrum); m and None where the residual is as white as
+    the three sources have it. The likelihood keeps the spectrum for the Laplace
+    approximation and the sampler."""
+    if post.likelihood.noise_model != "loop":
+        return m, None
+    last = [m]
+
+    def refit(theta: np.ndarray, ls: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        last[0] = find_map(post, method, x0=np.concatenate([theta, ls]))
+        return last[0].theta, last[0].log10_sigma
+
+    _, _, spectrum = fit_noise_spectrum(post.likelihood, m.theta, m.log10_sigma, refit)
+    return last[0], spectrum
+
+
 def _bound_notes(names: tuple[str, ...], bound: np.ndarray) -> dict[str, Any]:
     """The identifiability block of a MAP whose Laplace approximation leaves out the
     parameters on a prior bound."""
@@ -246,33 +321,6 @@ def _bound_notes(names: tuple[str, ...], bound: np.ndarray) -> dict[str, Any]:
                       f"{'its interval is' if one else 'their intervals are'} the prior's. "
                       "Excite the channels they act on, or leave them out of --params "
                       "(held at the nominal value)."]}
-
-
-def start_transient(recording: Recording, forward: ForwardModel,
-                    choice: bool | None = None) -> dict[str, Any]:
-    """Whether identify fits the record's start transient (IdentifyOptions.initial_state),
-    and why: ``choice`` True or False as given; None (the default) by the data check of
-    the diagnosis (discrepancy.checks.start_state): a record that starts mid-operation
-    carries the free response of the loop's states at its first sample, which taken as
-    noise leaves the intervals up to twice too wide (README, "A record that starts
-    mid-operation"). Returns {"fitted", "reason"} and, when checked, "start_difference"
-    (the controller's start-up difference, a share of u's RMS)."""
-    if choice is not None:
-        return {"fitted": bool(choice), "reason": "--initial-state" if choice
-                else "--no-initial-state"}
-    st = start_state(recording, loop_poles(forward))
-    if not st.at_rest:
-        where = (f"the record starts mid-operation (start-up difference {100 * st.rel_head:.2g}"
-                 " % of u)")
-    elif not st.told:
-        where = (f"the recorded u differs from the documented controller's output by "
-                 f"{100 * st.rel_tail:.2g} % throughout (a measured current, a DAQ's resolution, "
-                 "an amplifier limit), so whether the record starts at rest cannot be told: "
-                 "fitted to be safe")
-    else:
-        where = "the record starts at rest"
-    return {"fitted": not (st.at_rest and st.told), "reason": f"data check: {where}",
-            "start_difference": st.rel_head}
 
 
 @limited_threads
@@ -306,10 +354,19 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     like.set_model_prewhitening(m.theta, m.log10_sigma)
     m = find_map(post, opt.map_method, x0=np.concatenate([m.theta, m.log10_sigma]))
     m = _from_nominal_too(post, m, opt.map_method)
+    m = transient_kept(post, m, opt.map_method, start)
+    m, spectrum = learned_noise(post, m, opt.map_method) if opt.learn_spectrum else (m, None)
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
+    verdict = nominal = None
+    if opt.adequacy:
+        verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
+        verdict = _within_band(verdict, nominal, like.f_max_hz)
+    # a model that is not adequate reports the model-error posterior of the adequacy's
+    # fit (_with_model_error), which sampling this likelihood would not change: not sampled
+    map_only = opt.map_only or (nominal is not None and nominal.model_error is not None)
     bound = bounded = notes = None
-    if cov is None and opt.map_only and at_prior_bound(post, x_map)[:post.p].any():
+    if cov is None and map_only and at_prior_bound(post, x_map)[:post.p].any():
         # a parameter ran to its prior bound, where the central stencil leaves the prior:
         # the Laplace approximation truncated to the prior (bounded.py) when every bound
         # one is informed and near it; else the others' over the free dimensions and the
@@ -338,22 +395,27 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
                                           "squares)" if like.initial_state else ""),
                   "map": {s: {"value": float(10 ** v), "unit": u}
                           for s, v, u in zip(NOISE_SOURCES, m.log10_sigma, NOISE_UNITS,
-                                             strict=True)}},
+                                             strict=True)},
+                  **({"spectrum": spectrum.to_dict()} if spectrum is not None else {})},
         "fast_path": forward.fast,
         "excitation_port": forward.port,
         "n_bands": like.n_bands,
         "start_transient": start,
         "seed": opt.seed,
     }
-    nominal = None
-    if opt.adequacy:
-        verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
+    if verdict is not None:
         summary["adequacy"] = verdict.to_dict()
         if verdict.adequate and nominal.extra_cov is None and not (
-                opt.map_only and cov is None and bounded is None):
+                map_only and cov is None and bounded is None):
             nominal = None
-    if opt.map_only:
+    if map_only:
         summary["inference"] = "MAP with Laplace approximation"
+        if not opt.map_only:
+            summary["inference_note"] = (
+                "not sampled: the model is not adequate, and the intervals reported are "
+                "those of the posterior with the band-wise model error integrated out (the "
+                "adequacy's fit), which a sample of this likelihood would not change; its "
+                "own Laplace intervals are under parameters_model_only")
         if notes is not None or bound is not None:
             summary["identifiability"] = notes or _bound_notes(names, bound)
         if bounded is not None:
@@ -366,10 +428,11 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
             summary["laplace_cov"] = {          # the correlations, not only the sds
                 "names": list(names), "theta": np.asarray(cov)[:len(names),
                                                                :len(names)].tolist()}
-        check = noise_check(like, m.theta, m.log10_sigma, names)
-        if check is not None and check.doubted and cov is not None and bounded is None:
+        check = _checked(like, m, names, spectrum)
+        if check is not None and check.widens and cov is not None and bounded is None:
             wide, check = check.sandwich(np.asarray(cov)[:post.p, :post.p])
-            summary["parameters_white_noise"] = summary["parameters"]
+            if check.doubted:
+                summary["parameters_white_noise"] = summary["parameters"]
             summary["parameters"] = _laplace_summary(names, m, wide, recording.rig,
                                                      prior_set, bound, opt.seed)
             if "laplace_cov" in summary:
@@ -419,11 +482,12 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     summary["parameters"] = params_summary
     summary["sampler"] = sampler_block(run, n_walkers, laplace is not None, post.n_evals)
     samples = run.samples
-    check = noise_check(like, m.theta, m.log10_sigma, names)
-    if check is not None and check.doubted:
+    check = _checked(like, m, names, spectrum)
+    if check is not None and check.widens:
         rows, samples, check = sandwich_rows(check, run, post.bounds()[:post.p],
                                              recording.rig, params_summary)
-        summary["parameters_white_noise"] = params_summary
+        if check.doubted:
+            summary["parameters_white_noise"] = params_summary
         summary["parameters"] = rows
     if check is not None:
         summary["noise"]["check"] = check.to_dict()
@@ -433,6 +497,16 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     _with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
     return _result(summary, names, m, eps, like, posterior=dt, samples=run.samples)
+
+
+def _checked(like: WhittleLikelihood, m: MapResult, names: tuple[str, ...],
+             spectrum: LearnedSpectrum | None) -> NoiseCheck | None:
+    """The noise check at the MAP; with a learned spectrum that it does not doubt, its
+    intervals floored by the record's own scores (noise_check.robust_check)."""
+    check = noise_check(like, m.theta, m.log10_sigma, names)
+    if check is not None and not check.doubted and spectrum is not None:
+        check = robust_check(like, m.theta, m.log10_sigma, check)
+    return check
 
 
 def _warn_bound(summary: dict[str, Any], post: LogPosterior, x_map: np.ndarray,

@@ -79,6 +79,17 @@ def measure_colour(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray
     return NoiseColour(f_hz=np.asarray(like.band_freq_hz, dtype=float), C=C, source=source)
 
 
+def spectrum_colour(like: WhittleLikelihood, phi: NDArray, log10_sigma: NDArray,
+                    source: str = "") -> NoiseColour:
+    """The colour of a noise spectrum phi (n_bands, 4, 4; N Phi_b, as identify learned it,
+    inference/spectrum.py) against the white sources of ``like`` at log10_sigma:
+    L^-1 phi L^-H per band, averaged over the segments as measure_colour does."""
+    Li = np.linalg.inv(np.linalg.cholesky(white_spectrum(like, log10_sigma)))
+    C = Li @ phi @ np.conj(np.swapaxes(Li, -1, -2))
+    C, _ = segment_colour(like.counts, 0.5 * (C + np.conj(np.swapaxes(C, -1, -2))))
+    return NoiseColour(f_hz=np.asarray(like.band_freq_hz, dtype=float), C=C, source=source)
+
+
 def coloured_spectrum(like: WhittleLikelihood, log10_sigma: NDArray,
                       colour: NoiseColour) -> NDArray:
     """The true N Phi_b of a likelihood's bands: its white spectrum at log10_sigma

@@ -22,10 +22,11 @@ from dataclasses import dataclass
 
 import numpy as np
 from numpy.typing import NDArray
+from scipy import stats
 from scipy.optimize import minimize
 
 from bayes_amb.inference.forward import ForwardModel
-from bayes_amb.inference.noise_check import residual_jacobian
+from bayes_amb.inference.noise_check import P_DOUBT, residual_jacobian, segment_colour
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS
 from bayes_amb.inference.whittle import WhittleLikelihood
@@ -41,7 +42,9 @@ class Information:
     that the spread of the estimates is F^-1; else F^-1 B F^-1); ``log10_sigma`` the true
     white-equivalent intensities and ``log10_sigma_model`` the white ones identify fits
     (the same when the sources are white); ``n_bins`` the frequency bins that enter,
-    ``f_max_hz`` the top of the band."""
+    ``f_max_hz`` the top of the band; ``F_true`` the information of an estimator that
+    knows the true spectrum, and ``modelled`` whether identify will learn it (its
+    whiteness test finds the colour: its intervals then come from F_true)."""
 
     names: tuple[str, ...]
     theta: NDArray
@@ -51,6 +54,8 @@ class Information:
     f_max_hz: float
     B: NDArray | None = None
     log10_sigma_model: NDArray | None = None
+    F_true: NDArray | None = None
+    modelled: bool = False
 
 
 def log10_sigma_of(noise_rms: float, r1_rms: float, r2_rms: float) -> NDArray:
@@ -92,9 +97,32 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     WJ = np.einsum("kcd,kdj->kcj", W_band[band], J)
     F = 2 * np.einsum("kci,kcj->ij", J.conj(), WJ).real
     B = 2 * np.einsum("kci,kcd,kdj->ij", WJ.conj(), phi_true[band], WJ).real
+    if source_gain is None and colour is None:
+        return Information(tuple(names), theta, np.asarray(log10_sigma, dtype=float),
+                           0.5 * (F + F.T), int(like.k.size), like.f_max_hz,
+                           B=0.5 * (B + B.T), log10_sigma_model=ls_model)
+    TJ = np.einsum("kcd,kdj->kcj", np.linalg.inv(phi_true)[band], J)
+    F_true = 2 * np.einsum("kci,kcj->ij", J.conj(), TJ).real
     return Information(tuple(names), theta, np.asarray(log10_sigma, dtype=float),
                        0.5 * (F + F.T), int(like.k.size), like.f_max_hz,
-                       B=0.5 * (B + B.T), log10_sigma_model=ls_model)
+                       B=0.5 * (B + B.T), log10_sigma_model=ls_model,
+                       F_true=0.5 * (F_true + F_true.T),
+                       modelled=colour_is_found(like, phi_model, phi_true))
+
+
+def colour_is_found(like: WhittleLikelihood, phi_model: NDArray, phi_true: NDArray) -> bool:
+    """Whether identify's whiteness test will find the colour of phi_true against the white
+    sources phi_model (its expected statistic, noise_check's segments), so that identify
+    models the spectrum (inference/noise_fit.fit_noise_spectrum) instead of the white
+    sources: then its intervals are those of the true spectrum's information."""
+    L = np.linalg.cholesky(phi_model)
+    Li = np.linalg.inv(L)
+    Cb = Li @ phi_true @ np.conj(np.swapaxes(Li, -1, -2))
+    colour, groups = segment_colour(like.counts, Cb)
+    stat = sum(float(like.counts[g].sum() * np.sum(np.abs(colour[g[0]] - np.eye(4)) ** 2))
+               for g in groups)
+    dof = 16 * len(groups)
+    return bool(stats.chi2.sf(stat + dof, dof) < P_DOUBT)
 
 
 def _spectrum(like: WhittleLikelihood, sig2_band: NDArray) -> NDArray:

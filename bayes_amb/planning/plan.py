@@ -20,8 +20,13 @@ from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.io.controller_file import ControllerFile
 from bayes_amb.io.recording import Recording
-from bayes_amb.planning.colour import NoiseColour, measure_colour
-from bayes_amb.planning.fisher import Information, fisher_information, log10_sigma_of
+from bayes_amb.planning.colour import NoiseColour, measure_colour, spectrum_colour
+from bayes_amb.planning.fisher import (
+    Information,
+    fisher_information,
+    log10_sigma_of,
+    white_fit,
+)
 from bayes_amb.rig import Rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 from bayes_amb.uncertainty import get_spec, parse_param_list
@@ -182,10 +187,13 @@ def predicted_parameters(info: Information, rig: Rig,
     """Per parameter: the predicted posterior sd (the priors' curvature added: a normal
     prior's 1/sd^2), in theta units and physical, the prior sd and whether informed.
 
-    Noise that is not white as identify's model has it (``info.B``: a band-limited source,
-    a measured colour) fails identify's whiteness test, and identify then reports the
-    sandwich C (B + P) C (inference/noise_check.py), C = (F + P)^-1: that is the sd
-    predicted; the spread of the estimates about the truth is C B C."""
+    Noise that is not white as identify's sources have it (``info.B``: a band-limited
+    source, a measured colour) is learned by identify where its whiteness test finds it
+    (``info.modelled``; inference/spectrum.py): its sd and the spread of its estimates are
+    then those of the true spectrum's information, (F_true + P)^-1. Colour too faint for
+    the test leaves identify with the white sources: it reports their C = (F + P)^-1,
+    widened to the sandwich C (B + P) C where the test rejects, and the estimates spread
+    as C B C."""
     ps = PriorSet.build(info.names, priors)
     P = np.diag([1.0 / pr.b ** 2 if pr.kind == "normal" else 0.0 for pr in ps.priors])
     B = info.F if info.B is None else info.B
@@ -193,8 +201,11 @@ def predicted_parameters(info: Information, rig: Rig,
         cov = np.linalg.inv(info.F + P)
         white = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         reported = cov if info.B is None else cov @ (B + P) @ cov
+        spread_cov = cov @ B @ cov
+        if info.modelled and info.F_true is not None:     # identify learns the spectrum
+            reported = spread_cov = np.linalg.inv(info.F_true + P)
         sd = np.sqrt(np.clip(np.diag(reported), 0.0, None))
-        spread = np.sqrt(np.clip(np.diag(cov @ B @ cov), 0.0, None))
+        spread = np.sqrt(np.clip(np.diag(spread_cov), 0.0, None))
     except np.linalg.LinAlgError:
         sd = spread = white = np.full(len(info.names), np.inf)
     out = {}
@@ -277,9 +288,13 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
                      "tailed); excite more or longer for a prediction to rely on")
     ratios = [v["sd_white"] / v["sd"] for v in pars.values() if "sd_white" in v]
     if ratios and max(abs(np.log(r)) for r in ratios) > np.log(1.25):
-        notes.append(f"the noise is not white, as identify's likelihood has it: identify's "
-                     f"whiteness test will reject it and report the sandwich sds predicted "
-                     f"here; the white model's would be {min(ratios):.2f}-{max(ratios):.2f} x "
+        what = ("identify will learn its spectrum from the record (its noise.spectrum) "
+                "and report the sds predicted here, those of the true spectrum's "
+                "information" if info.modelled else
+                "identify's whiteness test will reject it and report the sandwich sds "
+                "predicted here")
+        notes.append(f"the noise is not white, as identify's three sources have it: {what}; "
+                     f"the white sources' would be {min(ratios):.2f}-{max(ratios):.2f} x "
                      "them (sd_white)")
     if noise.colour is not None and ratios:
         source = noise.colour.source or "the record given"
@@ -340,11 +355,18 @@ def recorded(recording: Recording, initial_state: bool | None = None
     res = identify(recording, BEARING_COEFFICIENTS,
                    options=IdentifyOptions(map_only=True, adequacy=False,
                                            initial_state=initial_state))
-    m = res.noise.map
-    colour = measure_colour(res.likelihood, res.map_result.theta, res.map_result.log10_sigma,
-                            source=str(recording.source))
-    return (Noise(noise_rms=m["sigma_noise"].value, r1_rms=m["sigma_r1"].value,
-                  r2_rms=m["sigma_r2"].value, colour=colour), dict(res.map))
+    like, m = res.likelihood, res.map_result
+    if like.spectrum is None:
+        ls = m.log10_sigma
+        colour = measure_colour(like, m.theta, ls, source=str(recording.source))
+    else:        # the learned spectrum, as a colour of the white sources that fit it best
+        phi = like.noise_spectrum(m.log10_sigma)
+        like.set_spectrum(None)
+        ls = white_fit(like, phi, m.log10_sigma)
+        colour = spectrum_colour(like, phi, ls, source=str(recording.source))
+    sig = 10.0 ** np.asarray(ls, dtype=float)
+    return (Noise(noise_rms=float(sig[0]), r1_rms=float(sig[1]), r2_rms=float(sig[2]),
+                  colour=colour), dict(res.map))
 
 
 def with_duration(design: Design, duration: float) -> Design:

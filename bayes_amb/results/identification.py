@@ -98,6 +98,52 @@ class NoiseCheck(Block):
 
 
 @block
+class NoiseSpectrum(Block):
+    """The noise colour learned from the record (inference/spectrum.py): whether it beat
+    the white sources (``adopted``; the likelihood-ratio statistic and its degrees of
+    freedom), each source's level (log10 sigma) and its gain in dB per channel at the
+    knots ``knot_hz``; ``colour`` whether the colour the sources still missed was folded
+    in, with its power over theirs (``colour_power``) at the segments' ``colour_hz``;
+    ``lines`` the narrowband lines (not at a multiple of the running speed) the spectrum
+    has as noise: frequency, level over the noise in dB, channels."""
+
+    adopted: bool
+    log10_sigma: list[float]
+    lr_statistic: float
+    dof: int
+    knot_hz: list[float]
+    gain_db: dict[str, dict[str, list[float]]]
+    colour: bool
+    notes: list[str]
+    lines: list[dict[str, Any]] | None = omitted()
+    colour_hz: list[float] | None = omitted()
+    colour_power: list[float] | None = omitted()
+
+    @property
+    def line(self) -> str:
+        """One line for the summary: what was learned."""
+        parts = []
+        if self.adopted:
+            spans = []
+            for src, per in self.gain_db.items():
+                vals = [v for row in per.values() for v in row]
+                spans.append(f"{src} {min(vals):+.0f} to {max(vals):+.0f} dB")
+            parts.append("each source's intensity per channel, smooth in frequency "
+                         f"(likelihood ratio {self.lr_statistic:.3g} on {self.dof} against "
+                         f"the white sources; gains {', '.join(spans)})")
+        if self.colour and self.colour_power:
+            parts.append(f"the colour they missed, over {len(self.colour_power)} segments "
+                         f"(power x{min(self.colour_power):.2g} to "
+                         f"x{max(self.colour_power):.2g} theirs)")
+        if self.lines:
+            shown = ", ".join(f"{ln['f_hz']:.4g} Hz (+{ln['level_db']:.0f} dB, "
+                              f"{','.join(ln['channels'])})" for ln in self.lines[:6])
+            more = f" and {len(self.lines) - 6} more" if len(self.lines) > 6 else ""
+            parts.append(f"lines taken as noise: {shown}{more}")
+        return "noise spectrum learned from the record: " + "; ".join(parts)
+
+
+@block
 class Noise(Block):
     """The noise model and its intensities (MAP; posterior after sampling), and the check
     of its whiteness on the record."""
@@ -106,6 +152,7 @@ class Noise(Block):
     map: dict[str, NoiseValue]
     posterior: dict[str, NoisePosterior] | None = omitted()
     check: NoiseCheck | None = omitted()
+    spectrum: NoiseSpectrum | None = omitted()
 
 
 @block

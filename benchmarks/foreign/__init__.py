@@ -20,12 +20,15 @@ from benchmarks.foreign.cases import (
     write_case,
     write_suite,
 )
+from benchmarks.foreign.disturbances import Disturbance, draw_disturbance
 from benchmarks.foreign.effects import EFFECT_PARAMS, HELD_OUT, Effect, build_plant
 from benchmarks.foreign.habits import Habits, draw_habits
 from benchmarks.foreign.loop import closed_loop, read_controller, run
+from benchmarks.foreign.oracle import fisher_information, fisher_widths
 from benchmarks.foreign.plant import bearing_changes, rotor
 
-__all__ = ["EFFECT_PARAMS", "HELD_OUT", "IN_FAMILY", "KINDS", "CaseSpec", "Effect", "Habits",
-           "Simulated", "bearing_changes", "build_plant", "closed_loop", "conceal",
-           "concealment", "draw_case", "draw_habits", "read_controller", "rotor", "run",
+__all__ = ["EFFECT_PARAMS", "HELD_OUT", "IN_FAMILY", "KINDS", "CaseSpec", "Disturbance",
+           "Effect", "Habits", "Simulated", "bearing_changes", "build_plant", "closed_loop",
+           "conceal", "concealment", "draw_case", "draw_disturbance", "draw_habits",
+           "fisher_information", "fisher_widths", "read_controller", "rotor", "run",
            "simulate", "write_case", "write_suite"]

@@ -23,6 +23,8 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.rig import Rig, load_rig
+from benchmarks.foreign.disturbances import KINDS as DISTURBANCE_KINDS
+from benchmarks.foreign.disturbances import Disturbance, disturbance_signals, draw_disturbance
 from benchmarks.foreign.effects import (
     EFFECT_PARAMS,
     HELD_OUT,
@@ -52,7 +54,8 @@ KIND_EFFECT = {"force_law": "magnet_force_law"}
 """Case kinds (and names in 'pair:<a>+<b>') that stand for an effect of another name."""
 
 KINDS = ("control", "control_force", *IN_FAMILY, "pair", "held_out", *HELD_OUT,
-         "full_truth", "bending", "control_one_channel", "force_law", "slew_limit")
+         "full_truth", "bending", "control_one_channel", "force_law", "slew_limit",
+         *DISTURBANCE_KINDS)
 
 
 @dataclass(frozen=True)
@@ -66,7 +69,8 @@ class CaseSpec:
     speed_rpm_true: the speed the rotor really runs at (gyroscopics, unbalance, runout);
     k_theta: ks reduction per axis (-); c_nsm: added damping per axis (N s/m); effects;
     habits; dt (s), duration_s (s, recorded part); controller_file: path of the controller
-    JSON (may also be given to write_case).
+    JSON (may also be given to write_case); disturbance: the coloured disturbances
+    (disturbances.Disturbance) or None.
     """
 
     kind: str = "control"
@@ -82,6 +86,7 @@ class CaseSpec:
     dt: float = 1e-4
     duration_s: float = 2.0
     controller_file: str | None = None
+    disturbance: Disturbance | None = None
 
     def theta(self, c_ref: float = 1000.0) -> dict[str, float]:
         """The tool's parameters: k_<axis> = theta, c_<axis> = c / c_ref."""
@@ -175,6 +180,13 @@ def simulate(spec: CaseSpec, controller: Controller | str | None, rng: np.random
     n_burn = round(spec.habits.burn_in_s / spec.dt)
     segs, plant = loops(spec, rig, ctrl, -n_burn, n_burn + n_rec)
     sig, draws = habit_signals(spec.habits, n_burn + n_rec, spec.dt, rng, -n_burn * spec.dt)
+    if spec.disturbance is not None:    # drawn after every habit signal
+        w_d, m_d, draws["disturbance"] = disturbance_signals(
+            spec.disturbance, n_burn + n_rec, spec.dt, rng, -n_burn * spec.dt)
+        draws["disturbance"].update(
+            w_rms_a=np.sqrt(np.mean(w_d[n_burn:] ** 2, axis=0)).tolist(),
+            m_rms_m=np.sqrt(np.mean(m_d[n_burn:] ** 2, axis=0)).tolist())
+        sig["w_add"], sig["m"] = sig["w_add"] + w_d, sig["m"] + m_d
     e = np.hstack([sig["eta"], sig["w_add"], sig["m"]])
     # the simulation starts at t = -burn-in: the record starts at t = 0, where the line
     # phases of the truth refer; the first state is sampled sensor_delay_s earlier still
@@ -415,7 +427,10 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
     drawn last); 'control_one_channel' a control excited on one channel only (a test
     design, drawn last). 'force_law' (or 'magnet_force_law') is the magnets' force law at
     one or both bearings, 'slew_limit' the amplifiers' slew-rate limit; either may be
-    named in a pair, e.g. 'pair:force_law+actuator_lag'.
+    named in a pair, e.g. 'pair:force_law+actuator_lag'. The coloured-disturbance kinds
+    (disturbances.KINDS: 'coloured_r2', 'mains', 'pink_sensor', 'coloured_mix' and the
+    held-out 'narrowband_r2', 'r1_band') are controls with a drawn ``disturbance``
+    (disturbances.draw_disturbance, drawn after the habits).
 
     ``eta_amplitude_a``: the excitation amplitude (A) instead of the habits' 0.3 A (no
     extra draw). ``excitation_level``: the range (or value) of eta / i0 a magnet law's gap
@@ -426,6 +441,7 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
     if eta_amplitude_a is not None:
         hab = replace(hab, eta_amplitude_a=float(eta_amplitude_a))
     truth, n_bending, effects = "reduced", 0, ()
+    disturbance = None
 
     def one(name: str) -> Effect:
         return _draw_effect(KIND_EFFECT.get(name, name), rng, noise_rms_m, duration_s,
@@ -437,6 +453,8 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
         hab = draw_force(hab, rng, load_rig().ki)
     elif kind == "control_one_channel":
         hab = replace(hab, eta_channels=(str(rng.choice(AXES)),))
+    elif kind in DISTURBANCE_KINDS:
+        hab, disturbance = draw_disturbance(kind, rng, hab, 31500.0)
     elif KIND_EFFECT.get(kind, kind) in (*IN_FAMILY, *HELD_OUT, *NONLINEAR_SEEN):
         effects = (one(kind),)
     elif kind == "pair" or kind.startswith("pair:"):
@@ -459,7 +477,7 @@ def draw_case(kind: str, rng: np.random.Generator, *, controller_file: str | Non
     return CaseSpec(kind=kind, truth=truth, n_bending=n_bending, speed_rpm=speed,
                     speed_rpm_true=float(speed_true), k_theta=k_theta, c_nsm=c_nsm,
                     effects=effects, habits=hab, dt=dt, duration_s=duration_s,
-                    controller_file=controller_file)
+                    controller_file=controller_file, disturbance=disturbance)
 
 
 def conceal(spec: CaseSpec, ctrl: Controller, rng: np.random.Generator, rig: Rig,
@@ -652,6 +670,12 @@ def calibrate_amplifier(spec: CaseSpec, ctrl: Controller, rng: np.random.Generat
 def truth_record(spec: CaseSpec, rig: Rig, concealments: dict[str, float],
                  draws: dict[str, Any]) -> dict[str, Any]:
     """The truth file's content (see README.md of this package for the keys)."""
+    draws = dict(draws)
+    dist = None
+    if spec.disturbance is not None:    # its parameters and what was drawn, in one place
+        dist = {**spec.disturbance.to_dict(), "draws": draws.pop("disturbance", {})}
+    held = [e.name for e in spec.effects if e.name in HELD_OUT]
+    held += list(dist["held_out"]) if dist else []
     return {
         "format": "foreign-truth/1",
         "kind": spec.kind,
@@ -666,9 +690,10 @@ def truth_record(spec: CaseSpec, rig: Rig, concealments: dict[str, float],
         "bearings": {a: {"ks_n_per_m": (1 - spec.k_theta[a]) * rig.ks,
                          "c_ns_per_m": spec.c_nsm[a]} for a in AXES},
         "effects": [{"name": e.name, "params": e.params} for e in spec.effects],
-        "held_out": [e.name for e in spec.effects if e.name in HELD_OUT],
+        "held_out": held,
         "habits": spec.habits.to_dict(),
         "draws": draws,
+        "disturbance": dist,
         "concealment": concealments,
         "noise_rms_m": spec.habits.noise_rms_m,
     }
@@ -733,6 +758,7 @@ def write_suite(out_dir: str | os.PathLike, kinds: dict[str, int], seed: int,
             truth = json.loads(paths["truth"].read_text())
             index.append({"name": name, "kind": kind, "csv": paths["csv"].name,
                           "truth": paths["truth"].name, "effects": truth["effects"],
-                          "concealment": truth["concealment"]})
+                          "concealment": truth["concealment"],
+                          "disturbance": (truth["disturbance"] or {}).get("families")})
     (out / "index.json").write_text(json.dumps(index, indent=1))
     return index
