@@ -457,3 +457,27 @@ def test_a_sampled_posterior_says_when_its_map_is_pushed_onto_a_bound(rig, obser
     k = res.parameters["k_By"]
     assert k.hdi90 == pytest.approx([-0.75, 0.15], abs=0.01)
     assert k.r_hat is not None
+
+
+def test_structure_only_above_identifys_band_leaves_its_model_adequate():
+    """The whole-band adequacy test's structure only above identify's validity band (the
+    flexible modes the reduced model leaves out by design) does not make identify's model
+    inadequate, nor widen its intervals (the model error is dropped); structure inside the
+    band, or a failed data check, keeps the verdict."""
+    from types import SimpleNamespace
+
+    from bayes_amb.discrepancy.adequacy import Adequacy
+    from bayes_amb.inference.identify import _within_band
+
+    above = Adequacy(False, "model NOT adequate: ...", channels=["Ax", "By"],
+                     bands_hz=[[1724.0, 3505.0]])
+    fit = SimpleNamespace(model_error="widened")
+    got = _within_band(above, fit, 513.0)
+    assert got.adequate and fit.model_error is None
+    assert "only above it, at 1724-3505 Hz on Ax,By" in got.line
+    for kept in (Adequacy(False, "x", channels=["Ax"], bands_hz=[[400.0, 3505.0]]),
+                 Adequacy(False, "x", channels=["Ax"], bands_hz=[[1724.0, 3505.0]],
+                          failed=["linearity"]),
+                 Adequacy(False, "x", channels=["Ax"], bands_hz=[])):
+        fit = SimpleNamespace(model_error="widened")
+        assert _within_band(kept, fit, 513.0) is kept and fit.model_error == "widened"
