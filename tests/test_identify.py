@@ -467,12 +467,12 @@ def test_structure_only_above_identifys_band_leaves_its_model_adequate():
     from types import SimpleNamespace
 
     from bayes_amb.discrepancy.adequacy import Adequacy
-    from bayes_amb.inference.identify import _within_band
+    from bayes_amb.inference.doubted import within_band
 
     above = Adequacy(False, "model NOT adequate: ...", channels=["Ax", "By"],
                      bands_hz=[[1724.0, 3505.0]])
     fit = SimpleNamespace(model_error="widened")
-    got = _within_band(above, fit, 513.0)
+    got = within_band(above, fit, 513.0)
     assert got.adequate and fit.model_error is None
     assert "only above it, at 1724-3505 Hz on Ax,By" in got.line
     for kept in (Adequacy(False, "x", channels=["Ax"], bands_hz=[[400.0, 3505.0]]),
@@ -480,4 +480,4 @@ def test_structure_only_above_identifys_band_leaves_its_model_adequate():
                           failed=["linearity"]),
                  Adequacy(False, "x", channels=["Ax"], bands_hz=[])):
         fit = SimpleNamespace(model_error="widened")
-        assert _within_band(kept, fit, 513.0) is kept and fit.model_error == "widened"
+        assert within_band(kept, fit, 513.0) is kept and fit.model_error == "widened"

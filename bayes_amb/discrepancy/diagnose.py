@@ -343,9 +343,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "candidates": sel.scores,
         "fit": {"before": {k: before[k] for k in ("nrmse", "whiteness_p")},
                 "after": {k: after[k] for k in ("nrmse", "whiteness_p")},
-                "log_likelihood_gain": float(sel.final.log_post - (
-                    own_noise_fit(nominal, always=True) if sel.accepted else nominal
-                ).log_post)},
+                "log_likelihood_gain": float(sel.final.log_post - nominal.log_post)},
         "parameters_before": theta_summary(nominal, s_nom),
         "parameters_after": theta_summary(reported, s_coef),
         "parameters_after_from": _after_from(sel.final, reported, s_coef is not s_fin),

@@ -147,12 +147,12 @@ def nominal_map(post: LogPosterior) -> NDArray:
 
 def learned_noise_map(post: LogPosterior, x: NDArray) -> NDArray:
     """The noise spectrum learned from the record at the white model's MAP x and the MAP
-    under it, as identify has it (inference/noise_fit.fit_noise_spectrum): the nominal
-    fit, the location tests and the models compared share it (the model finally reported
-    is refitted without it: own_noise_fit), learned without the bins at multiples of the
-    running speed (unbalance and runout are physics the diagnosis must find: learned as
-    noise, a 2e-6 kg m unbalance's Bayes factor fell from above 3 to -67). x as it was
-    where the residual is as white as the three sources have it."""
+    under it, as identify has it (inference/noise_fit.fit_noise_spectrum), for identify's
+    adequacy test (its location tests and model error), learned without the bins at
+    multiples of the running speed (unbalance and runout are physics to find: learned as
+    noise, a 2e-6 kg m unbalance's Bayes factor fell from above 3 to -67 where the
+    diagnosis was tried with it). x as it was where the residual is as white as the three
+    sources have it."""
     p = post.p
 
     def refit(theta: NDArray, ls: NDArray) -> tuple[NDArray, NDArray]:
@@ -180,8 +180,8 @@ def fit_nominal(recording: Recording, params: tuple[str, ...], eps: NDArray,
 
 def with_learned_noise(fm: FittedModel) -> FittedModel:
     """The nominal fit ``fm`` with the noise spectrum learned from its residual
-    (learned_noise_map) and refitted under it, its noise filters then the ones the models
-    compared share; ``fm`` as it is where the residual is as white as the sources have it.
+    (learned_noise_map) and refitted under it, its noise filters then held (as fit_nominal
+    holds them); ``fm`` as it is where the residual is as white as the sources have it.
     Learned after the nonlinearity screens and their models (adequacy.nominal_assessment):
     learned before them, a clipped current's misfit became noise, and the clipping
     regression's gain fell from about 1 to 0.41."""
@@ -230,29 +230,22 @@ def free_covariance(post: LogPosterior, x: NDArray, last: int = 0) -> NDArray | 
     return None
 
 
-def own_noise_fit(fm: FittedModel, always: bool = False) -> FittedModel:
+def own_noise_fit(fm: FittedModel) -> FittedModel:
     """The model refitted with its own loop noise filters (eq. 14 through its extended
     loop, at its MAP) instead of the shared nominal ones: the filters the comparison shares
     are right for the nominal loop only, and a lag, delay or flexible mode changes how the
     noise reaches eps. Its posterior is the one reported; its Bayes factor stays the one
-    from the comparison. The noise spectrum learned on the nominal model's residual is
-    left out here (the white sources, each band's spectrum integrated out under the
-    inverse-Wishart prior): learned where the physics was still missing, it made the
-    coefficients after the diagnosis cover 64 of 80 on the golden cases, against 74.
-    ``always``: the nominal model too, where it has a learned spectrum (the likelihood
-    gain of the chosen model is taken against it, under the same noise model)."""
-    if not fm.candidates and not (always and fm.like.spectrum is not None):
+    from the comparison."""
+    if not fm.candidates:
         return fm
     like = copy.copy(fm.like)
     like.fixed_filters = None
-    like.spectrum = None
     like.set_noise_reference(fm.params)
     post = LogPosterior(like, fm.forward.priors)
     x, log_post = local_fit(post, fm.x)
     like.set_noise_reference(x[:fm.p])
     x, log_post = local_fit(post, x)
-    idx = (np.arange(fm.forward.slices[-1].start, fm.forward.slices[-1].stop)
-           if fm.candidates else np.arange(0))
+    idx = np.arange(fm.forward.slices[-1].start, fm.forward.slices[-1].stop)
     cov = free_covariance(post, x, last=idx.size)
     return FittedModel(fm.candidates, fm.forward, like, post, x, log_post, cov=cov,
                        log_bf=fm.log_bf, log_odds=fm.log_odds, node_range=fm.node_range)

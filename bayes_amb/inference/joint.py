@@ -17,7 +17,7 @@ MAP is searched from the precision-weighted combination of the records' own MAPs
 filters refreshed at it, and the Laplace covariance is the inverse Hessian there.
 
 When a record's model is not adequate (its adequacy test), its own reported posterior is
-the one with the model error integrated out (identify._with_model_error); the joint
+the one with the model error integrated out (doubted.with_model_error); the joint
 posterior is then the product of the records' reported Gaussian posteriors (divided by the
 prior counted R - 1 times too many), so that no record's doubt is lost in the combination.
 

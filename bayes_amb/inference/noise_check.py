@@ -49,6 +49,7 @@ from scipy import stats
 
 from bayes_amb.inference.posterior import stretch_draws, summarise
 from bayes_amb.inference.sampler import SamplerRun
+from bayes_amb.inference.spectrum import kept_counts
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.rig import Rig
 
@@ -114,7 +115,7 @@ def _whitened(like: WhittleLikelihood, R: NDArray, log10_sigma: NDArray,
               counts: NDArray | None = None) -> tuple[NDArray, NDArray]:
     """band_colour of the residual DFT R (1, nf, 4) (``counts``: each band's bins that R
     holds, where some were zeroed; at least one)."""
-    counts = like.counts if counts is None else np.maximum(counts, 1)
+    counts = np.maximum(like.counts if counts is None else counts, 1)
     P = like._band_sums(R)[0] / counts[:, None, None]
     L = np.linalg.cholesky(white_spectrum(like, log10_sigma))
     Li = np.linalg.inv(L)
@@ -245,69 +246,92 @@ def sandwich_cov(C: NDArray, F: NDArray, B: NDArray, floor: float = EIG_FLOOR) -
     return out
 
 
+@dataclass(frozen=True)
+class _Measured:
+    """The whiteness test's measurement at (theta, log10_sigma): the model's Cholesky
+    factors L per band, the segment-averaged colour per band and its segments, each band's
+    bins counted (``counts``: without the masked ones), the statistic and its p value."""
+
+    L: NDArray
+    colour: NDArray
+    groups: list[NDArray]
+    counts: NDArray
+    stat: float
+    p_value: float
+
+    @property
+    def dof(self) -> int:
+        return 16 * len(self.groups)
+
+
+def _measure(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray, min_bins: int,
+             mask: NDArray | None = None) -> _Measured | None:
+    """The whiteness test (module docstring) of the residual at (theta, log10_sigma), the
+    bins of ``mask`` left out; None for the naive 'iid' noise model, which is not meant to
+    be right, and for a residual of rounding (no noise to test)."""
+    if like.noise_model != "loop":
+        return None
+    R = _residual(like, np.asarray(theta, dtype=float))
+    if np.sum(np.abs(R) ** 2) <= ROUNDING**2 * float(np.sum(np.abs(like.E) ** 2)):
+        return None
+    counts = kept_counts(like, mask)
+    if mask is not None:                  # bins left out (synchronous lines: physics)
+        R = np.where(mask[None, :, None], 0.0, R)
+    Cb, L = _whitened(like, R, log10_sigma, counts)
+    colour, groups = segment_colour(counts, Cb, min_bins)
+    stat = sum(float(counts[g].sum() * np.sum(np.abs(colour[g[0]] - np.eye(4)) ** 2))
+               for g in groups)
+    return _Measured(L, colour, groups, counts, stat,
+                     float(stats.chi2.sf(stat, 16 * len(groups))))
+
+
 def colour_correction(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
                       min_bins: int = MIN_BINS, mask: NDArray | None = None
                       ) -> tuple[float, NDArray, NDArray] | None:
     """The whiteness test's p value at (theta, log10_sigma) and the colour it measured:
     per segment of at least min_bins bins its bin-weighted centre frequency (Hz) and mean
     whitened periodogram C (n_segments, 4, 4), the identity where the noise is as
-    modelled (``mask``: bins left out). None for a residual of rounding or the naive 'iid'
-    model (noise_check)."""
-    if like.noise_model != "loop":
+    modelled (``mask``: bins left out). None as _measure."""
+    m = _measure(like, theta, log10_sigma, min_bins, mask)
+    if m is None:
         return None
-    R = _residual(like, np.asarray(theta, dtype=float))
-    if np.sum(np.abs(R) ** 2) <= ROUNDING**2 * float(np.sum(np.abs(like.E) ** 2)):
-        return None
-    counts = like.counts
-    if mask is not None:                  # bins left out (synchronous lines: physics)
-        R = np.where(mask[None, :, None], 0.0, R)
-        counts = like.counts - np.add.reduceat(mask.astype(int), like.starts)
-    Cb, _ = _whitened(like, R, log10_sigma, counts)
-    colour, groups = segment_colour(np.maximum(counts, 0), Cb, min_bins)
-    stat = sum(float(counts[g].sum() * np.sum(np.abs(colour[g[0]] - np.eye(4)) ** 2))
-               for g in groups)
-    f = np.array([np.average(like.band_freq_hz[g], weights=like.counts[g]) for g in groups])
-    return (float(stats.chi2.sf(stat, 16 * len(groups))), f,
-            np.stack([colour[g[0]] for g in groups]))
+    f = np.array([np.average(like.band_freq_hz[g], weights=like.counts[g]) for g in m.groups])
+    return m.p_value, f, np.stack([m.colour[g[0]] for g in m.groups])
+
+
+def _weighted_jacobian(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray
+                       ) -> tuple[NDArray, NDArray, NDArray]:
+    """W_k J_k (nf, 4, p) (J = dR/dtheta, W = (N Phi_b)^-1 of the likelihood's spectrum at
+    log10_sigma), each bin's band index, and the information F = 2 Re sum J^H W J."""
+    J = residual_jacobian(like, theta)
+    band = np.repeat(np.arange(like.counts.size), like.counts)
+    WJ = np.einsum("kcd,kdj->kcj", np.linalg.inv(white_spectrum(like, log10_sigma))[band], J)
+    F = 2 * np.einsum("kci,kcj->ij", J.conj(), WJ).real
+    return WJ, band, 0.5 * (F + F.T)
 
 
 def noise_check(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
                 names: tuple[str, ...] | list[str], min_bins: int = MIN_BINS
                 ) -> NoiseCheck | None:
     """The whiteness test of the residual at (theta, log10_sigma), and where it rejects,
-    the information F and score variance B its sandwich needs. None for the naive 'iid'
-    noise model, which is not meant to be right, and for a residual of rounding."""
-    if like.noise_model != "loop":
-        return None
+    the information F and score variance B its sandwich needs. None as _measure."""
     theta = np.asarray(theta, dtype=float)
-    R = _residual(like, theta)
-    if np.sum(np.abs(R) ** 2) <= ROUNDING**2 * float(np.sum(np.abs(like.E) ** 2)):
-        return None                     # a residual of rounding: no noise to test
-    Cb, L = _whitened(like, R, log10_sigma)
-    colour, groups = segment_colour(like.counts, Cb, min_bins)
-    stat = 0.0
+    m = _measure(like, theta, log10_sigma, min_bins)
+    if m is None:
+        return None
     rows = []
-    for g in groups:
-        n_s = like.counts[g]
-        Cs = colour[g[0]]
-        stat += float(n_s.sum() * np.sum(np.abs(Cs - np.eye(4)) ** 2))
+    for g in m.groups:
         f = like.band_freq_hz[g]
-        rows.append([float(f[0]), float(f[-1]), float(np.real(np.trace(Cs)) / 4)])
-    dof = 16 * len(groups)
-    p_value = float(stats.chi2.sf(stat, dof))
+        rows.append([float(f[0]), float(f[-1]), float(np.real(np.trace(m.colour[g[0]])) / 4)])
     far = [max(rows, key=lambda r: r[2]), min(rows, key=lambda r: r[2])]
-    check = NoiseCheck(doubted=p_value < P_DOUBT, p_value=p_value, statistic=stat, dof=dof,
-                       names=tuple(names), bands_hz=far)
+    check = NoiseCheck(doubted=m.p_value < P_DOUBT, p_value=m.p_value, statistic=m.stat,
+                       dof=m.dof, names=tuple(names), bands_hz=far)
     if not check.doubted:
         return check
-    J = residual_jacobian(like, theta)
-    band = np.repeat(np.arange(like.counts.size), like.counts)
-    W = np.linalg.inv(white_spectrum(like, log10_sigma))
-    WJ = np.einsum("kcd,kdj->kcj", W[band], J)
-    true = L @ colour @ np.conj(np.swapaxes(L, -1, -2))
-    F = 2 * np.einsum("kci,kcj->ij", J.conj(), WJ).real
+    WJ, band, F = _weighted_jacobian(like, theta, log10_sigma)
+    true = m.L @ m.colour @ np.conj(np.swapaxes(m.L, -1, -2))
     B = 2 * np.einsum("kci,kcd,kdj->ij", WJ.conj(), true[band], WJ).real
-    return replace(check, F=0.5 * (F + F.T), B=0.5 * (B + B.T))
+    return replace(check, F=F, B=0.5 * (B + B.T))
 
 
 def robust_check(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
@@ -322,17 +346,13 @@ def robust_check(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
     the learned intervals' z-scores had RMS 1.22."""
     theta = np.asarray(theta, dtype=float)
     R = _residual(like, theta)[0]
-    J = residual_jacobian(like, theta)
-    band = np.repeat(np.arange(like.counts.size), like.counts)
-    W = np.linalg.inv(white_spectrum(like, log10_sigma))[band]
-    WJ = np.einsum("kcd,kdj->kcj", W, J)
-    F = 2 * np.einsum("kci,kcj->ij", J.conj(), WJ).real
+    WJ, _, F = _weighted_jacobian(like, theta, log10_sigma)
     scores = 2 * np.einsum("kcj,kc->kj", WJ.conj(), R).real
-    start = np.concatenate([[0], np.cumsum(like.counts)])
-    groups = segments(like.counts, CLUSTER_BINS)
-    clustered = np.stack([scores[start[g[0]]:start[g[-1] + 1]].sum(axis=0) for g in groups])
+    ends = np.append(like.starts, like.counts.sum())
+    clustered = np.stack([scores[ends[g[0]]:ends[g[-1] + 1]].sum(axis=0)
+                          for g in segments(like.counts, CLUSTER_BINS)])
     B = clustered.T @ clustered
-    return replace(check, F=0.5 * (F + F.T), B=0.5 * (B + B.T), floor=1.0)
+    return replace(check, F=F, B=0.5 * (B + B.T), floor=1.0)
 
 
 def sandwich_draws(check: NoiseCheck, samples: NDArray, bounds: list[tuple[Any, Any]]

@@ -1,5 +1,5 @@
-"""The noise spectrum fitted to a record and the MAP under it: the driver identify and the
-diagnosis share (the spectrum itself, its fit and its algebra: spectrum.py).
+"""The noise spectrum fitted to a record and the MAP under it: the driver identify and its
+adequacy test share (the spectrum itself, its fit and its algebra: spectrum.py).
 
 From the white model's MAP: the whiteness test of the residual (noise_check.py) decides
 whether anything is learned; then the sources' smooth gains (learn_spectrum), the colour
@@ -23,6 +23,7 @@ from bayes_amb.inference.spectrum import (
     LEARN_ROUNDS,
     LearnedSpectrum,
     learn_spectrum,
+    synchronous_bins,
 )
 
 LINE_P = 1e-3
@@ -50,11 +51,9 @@ def find_lines(like: Any, theta: NDArray, log10_sigma: NDArray, speed_rpm: float
     q = np.sum(np.abs(Wh) ** 2, axis=1)
     f = like.k / (like.n * like.forward.dt)
     hit = stats.gamma.sf(q, 4) < LINE_P / q.size
-    if speed_rpm:
-        df = 1.0 / (like.n * like.forward.dt)
-        f_rot = speed_rpm / 60.0
-        near = np.abs(f - f_rot * np.round(f / f_rot)) <= SYNCHRONOUS_BINS * df
-        hit &= ~(near & (np.round(f / f_rot) >= 1))
+    sync = synchronous_bins(like, speed_rpm, SYNCHRONOUS_BINS)
+    if sync is not None:
+        hit &= ~sync
     lines: list[dict[str, Any]] = []
     idx = np.flatnonzero(hit)
     for group in np.split(idx, np.flatnonzero(np.diff(idx) > 1) + 1) if idx.size else []:

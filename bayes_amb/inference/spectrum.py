@@ -138,12 +138,7 @@ class LearnedSpectrum:
         """The colour C at the frequencies f_hz (nf, 4, 4): each entry interpolated
         linearly between the segments (a convex combination of positive definite
         matrices), the end segments' held beyond them."""
-        f = np.asarray(f_hz, dtype=float)
-        flat = self.colour.reshape(self.colour.shape[0], -1)
-        out = np.stack([np.interp(f, self.colour_hz, col.real)
-                        + 1j * np.interp(f, self.colour_hz, col.imag) for col in flat.T],
-                       axis=-1)
-        return out.reshape(f.size, 4, 4)
+        return interp_matrices(f_hz, self.colour_hz, self.colour)
 
     @property
     def in_use(self) -> bool:
@@ -167,6 +162,19 @@ class LearnedSpectrum:
         return out
 
 
+def interp_matrices(f: NDArray, f_at: NDArray, M: NDArray) -> NDArray:
+    """Matrices M (n, ...) given at the frequencies f_at (n,), at the frequencies f: each
+    entry interpolated linearly (for Hermitian positive definite M a convex combination,
+    so positive definite), the end ones held beyond f_at; (f.size, ...)."""
+    f = np.asarray(f, dtype=float)
+    flat = M.reshape(M.shape[0], -1)
+    out = np.empty((f.size, flat.shape[1]), dtype=complex)
+    for j in range(flat.shape[1]):
+        out[:, j] = (np.interp(f, f_at, flat[:, j].real)
+                     + 1j * np.interp(f, f_at, flat[:, j].imag))
+    return out.reshape(f.size, *M.shape[1:])
+
+
 def colour_transform(Phi: NDArray, C: NDArray) -> NDArray:
     """T (n, 4, 4) with T Phi T^H = L C L^H, L the Cholesky factor of Phi: T = L C^1/2
     L^-1 (the congruence that folds a colour into each source's spectrum alike)."""
@@ -174,6 +182,20 @@ def colour_transform(Phi: NDArray, C: NDArray) -> NDArray:
     w, V = np.linalg.eigh(0.5 * (C + np.conj(np.swapaxes(C, -1, -2))))
     half = V @ (np.sqrt(np.maximum(w, 1e-12))[..., None] * np.conj(np.swapaxes(V, -1, -2)))
     return L @ half @ np.linalg.inv(L)
+
+
+def fold_colour(phi_sources: NDArray, spectrum: LearnedSpectrum, band_hz: NDArray
+                ) -> tuple[NDArray, NDArray]:
+    """The band filter products of the sources (3, n_bands, 4, 4) with the spectrum's
+    colour folded into each alike (colour_transform at the levels it was measured at), and
+    each band's power gain tr(new) / tr(old), which the prewhitening design follows."""
+    sig2 = 10.0 ** (2 * spectrum.colour_log10_sigma)
+    Phi = np.tensordot(sig2, phi_sources, axes=(0, 0))
+    T = colour_transform(Phi, spectrum.colour_at(band_hz))
+    folded = T[None] @ phi_sources @ np.conj(np.swapaxes(T, -1, -2))[None]
+    new = np.tensordot(sig2, folded, axes=(0, 0))
+    return folded, (np.trace(new, axis1=1, axis2=2).real
+                    / np.trace(Phi, axis1=1, axis2=2).real)
 
 
 def hat_basis(x: NDArray, knots: NDArray) -> NDArray:

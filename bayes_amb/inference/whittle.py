@@ -45,47 +45,21 @@ from collections import OrderedDict
 
 import numpy as np
 from numpy.typing import NDArray
-from scipy.signal import lfilter, welch
+from scipy.signal import lfilter
 
 from bayes_amb.control.discrete import ss_freqresp, ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference import band_algebra, kernels, walker_kernels
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
 from bayes_amb.inference.fused import FusedLikelihood
-from bayes_amb.inference.spectrum import LearnedSpectrum, colour_transform
+from bayes_amb.inference.prewhitening import data_prewhitening, minimum_phase_inverse
+from bayes_amb.inference.spectrum import LearnedSpectrum, fold_colour
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
+NOISE_UNITS = ("m", "m", "A")
 
 LONG_TAPS = 2048
 """Prewhitening FIR length under a learned noise spectrum (set_model_prewhitening)."""
-NOISE_UNITS = ("m", "m", "A")
-
-
-def minimum_phase_inverse(power: NDArray, n_taps: int) -> NDArray:
-    """FIR taps of the minimum-phase filter w with |w|^2 = 1/power (power on a uniform grid
-    of n_fft/2 + 1 points over [0, pi]), by the real cepstrum; truncated with a half-Hann
-    taper and scaled to unit RMS gain."""
-    n_fft = 2 * (power.size - 1)
-    log_mag = -0.5 * np.log(np.maximum(power, 1e-300 + 1e-12 * power.max()))
-    c = np.fft.irfft(log_mag, n_fft)                       # real cepstrum of log|w|
-    fold = np.zeros(n_fft)
-    fold[0] = c[0]
-    fold[1:n_fft // 2] = 2 * c[1:n_fft // 2]
-    fold[n_fft // 2] = c[n_fft // 2]
-    w = np.fft.irfft(np.exp(np.fft.rfft(fold)), n_fft)[:n_taps]
-    w = w * np.cos(0.5 * np.pi * np.arange(n_taps) / n_taps) ** 2
-    return w / np.sqrt(np.mean(np.abs(np.fft.rfft(w, n_fft)) ** 2))
-
-
-def data_prewhitening(eps: NDArray, dt: float, n_taps: int = 128) -> NDArray:
-    """Prewhitening FIR from the data: |w|^2 ~ 1 / (Welch PSD of eps, mean over channels)."""
-    n = eps.shape[0]
-    nper = int(min(512, max(32, 2 ** int(np.log2(max(n // 8, 32))))))
-    _, pxx = welch(eps, fs=1.0 / dt, nperseg=nper, axis=0)
-    power = np.mean(pxx, axis=1)
-    grid = np.linspace(0, 1, 2049)
-    power = np.interp(grid, np.linspace(0, 1, power.size), power)
-    return minimum_phase_inverse(power, n_taps)
 
 
 def band_edges(n_bins: int, n_bands: int = 256) -> NDArray:
@@ -169,6 +143,7 @@ class WhittleLikelihood:
         self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (n * forward.dt)
         self.prefilter = np.ones(1)
         self.spectrum: LearnedSpectrum | None = None   # set_spectrum: a learned noise colour
+        self._colour_ratio: NDArray | None = None      # its folded colour's power per band
         self.initial_state = False      # set_initial_state: fit the record's start transient
         self._transient_pinv: NDArray | None = None
         if noise_model == "loop":
@@ -207,9 +182,8 @@ class WhittleLikelihood:
             gain = gain * self.spectrum.gain(f).reshape(12, -1).T[:, None, :]
         power = sum(sig2[s] * gain[:, :, 4 * s:4 * (s + 1)].sum(axis=(1, 2))
                     for s in range(3)) / 4
-        ratio = getattr(self, "_colour_ratio", None)
-        if ratio is not None:            # the folded colour's power, between the bands
-            power = power * np.interp(f, self.band_freq_hz, ratio)
+        if self._colour_ratio is not None:   # the folded colour's power, between the bands
+            power = power * np.interp(f, self.band_freq_hz, self._colour_ratio)
         return power
 
     def set_model_prewhitening(self, theta_ref: NDArray, log10_sigma: NDArray,
@@ -267,15 +241,9 @@ class WhittleLikelihood:
             phi.append(np.add.reduceat(P, self.starts, axis=0) / self.counts[:, None, None])
         self.phi_sources = np.stack(phi)                            # (3, nbands, 4, 4)
         self._colour_ratio = None
-        sp = self.spectrum
-        if sp is not None and sp.colour is not None:    # fold the measured colour in
-            sig2 = 10.0 ** (2 * sp.colour_log10_sigma)
-            Phi = np.tensordot(sig2, self.phi_sources, axes=(0, 0))
-            T = colour_transform(Phi, sp.colour_at(self.band_freq_hz))
-            self.phi_sources = T[None] @ self.phi_sources @ np.conj(np.swapaxes(T, -1, -2))[None]
-            new = np.tensordot(sig2, self.phi_sources, axes=(0, 0))
-            self._colour_ratio = (np.trace(new, axis1=1, axis2=2).real
-                                  / np.trace(Phi, axis1=1, axis2=2).real)
+        if self.spectrum is not None and self.spectrum.colour is not None:
+            self.phi_sources, self._colour_ratio = fold_colour(
+                self.phi_sources, self.spectrum, self.band_freq_hz)
         self.theta_ref = np.array(theta_ref, dtype=float)
         self._last_sums = None
         if getattr(self, "_row_sums", None) is not None:

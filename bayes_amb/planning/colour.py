@@ -34,6 +34,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.inference.noise_check import band_colour, segment_colour, white_spectrum
+from bayes_amb.inference.spectrum import interp_matrices
 from bayes_amb.inference.whittle import WhittleLikelihood
 
 
@@ -50,13 +51,7 @@ class NoiseColour:
         """C at the frequencies f (Hz): linear interpolation of each entry (a convex
         combination of positive definite matrices, so positive definite), the end bands'
         colour held beyond the measured range."""
-        f = np.asarray(f, dtype=float)
-        flat = self.C.reshape(self.C.shape[0], -1)
-        out = np.empty((f.size, flat.shape[1]), dtype=complex)
-        for j in range(flat.shape[1]):
-            out[:, j] = (np.interp(f, self.f_hz, flat[:, j].real)
-                         + 1j * np.interp(f, self.f_hz, flat[:, j].imag))
-        return out.reshape(f.size, *self.C.shape[1:])
+        return interp_matrices(f, self.f_hz, self.C)
 
     def summary(self) -> dict[str, Any]:
         """What a plan's JSON says of it: source, bands, and the mean colour per channel
