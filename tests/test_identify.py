@@ -481,3 +481,30 @@ def test_structure_only_above_identifys_band_leaves_its_model_adequate():
                  Adequacy(False, "x", channels=["Ax"], bands_hz=[])):
         fit = SimpleNamespace(model_error="widened")
         assert within_band(kept, fit, 513.0) is kept and fit.model_error == "widened"
+
+
+def test_the_sample_started_beside_the_adequacy_test_is_the_sample(rig, observer_1ms,
+                                                                    monkeypatch):
+    """identify samples while its adequacy test runs (inference/pending.py) and drops the
+    sample when the verdict doubts the model. A sample stopped at its first check, on a
+    model that the verdict then finds adequate, is drawn again from the same seed: the
+    posterior is the one an undisturbed run gives, draw for draw."""
+    import bayes_amb.inference.pending as pending
+
+    cfg = SimulationConfig(truth="reduced", params={"k_By": 0.5}, dt=observer_1ms.dt,
+                           duration=0.5, noise_rms=1e-7, seed=2)
+    rec, _ = simulate_recording(rig, observer_1ms, cfg)
+    opt = IdentifyOptions(steps=100)
+    plain = identify(rec, "k_By", options=opt)
+    assert plain.adequacy.adequate and plain.sampler is not None
+    calls = []
+
+    def doubting(self):
+        calls.append(1)
+        return True
+
+    monkeypatch.setattr(pending.PendingAdequacy, "doubted", doubting)
+    again = identify(rec, "k_By", options=opt)
+    assert calls, "the speculative sampler never asked the adequacy test"
+    assert np.array_equal(again.samples, plain.samples)
+    assert again.parameters["k_By"].hdi90 == plain.parameters["k_By"].hdi90

@@ -113,6 +113,8 @@ def format_summary(s: Identification) -> str:
     check = s.noise.check if s.noise is not None else None
     if check is not None and (check.doubted or check.sd_ratio):
         lines.append(f"noise: {check.line}")
+    if s.model is not None:
+        lines.append(s.model.line)
     if s.adequacy is not None:
         lines.append(f"adequacy: {s.adequacy.line}")
     return "\n".join(lines)

@@ -50,6 +50,7 @@ from bayes_amb.discrepancy.library import (
     equivalents_of,
     left_out_coefficients,
 )
+from bayes_amb.discrepancy.library.flexible_mode import past_kept
 from bayes_amb.discrepancy.locate import (
     LocateOptions,
     Location,
@@ -252,6 +253,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     if not np.isfinite(nominal.log_post):
         raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
                             "likelihood anywhere in the prior range")
+    if opt.candidates is None:      # the bending pairs the nominal model does not keep
+        candidates = past_kept(candidates, nominal.forward.reduced.n_bending)
     say("locating the mismatch")
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=opt.seed))

@@ -73,7 +73,8 @@ class ExtendedForwardModel(ForwardModel):
         else:
             super().__init__(recording, params)
             self.ctx = model_context(self)
-            self._bases: dict[tuple[int, ...], ReducedModel] = {(): self.reduced}
+            self._bases: dict[tuple[int, ...], ReducedModel] = {
+                tuple(range(1, self.reduced.n_bending + 1)): self.reduced}
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
@@ -84,7 +85,10 @@ class ExtendedForwardModel(ForwardModel):
         self.fast = False
         self.candidates = tuple(candidates)
         self.theta_names = self.params
-        pairs = tuple(sorted({k for c in self.candidates for k in c.bending_pairs()}))
+        # the pairs the nominal model keeps (the control band's, model_band.py) and those
+        # the candidates add
+        pairs = tuple(sorted({*range(1, self.reduced.n_bending + 1),
+                              *(k for c in self.candidates for k in c.bending_pairs())}))
         if pairs not in self._bases:
             self._bases[pairs] = keep_bending_pairs(
                 reduce_pseudo_modal(self.reduced.full, n_bending=max(pairs)), pairs)

@@ -30,6 +30,7 @@ from bayes_amb.inference.loop_model import (
     error_form_matrices,
     loop_matrices,
 )
+from bayes_amb.inference.model_band import choose_model, feedback_part, validity_hz
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rotor import full_model
@@ -164,11 +165,14 @@ def _diagonalise_lapack(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None
 class ForwardModel:
     """S(theta) forward model of one recording for a set of named parameters.
 
-    The nominal model is the rig's 8-state reduced model at the recording's speed, sampled
-    exactly at its dt; theta enters through the reduced LFT (eqs. 51-52).
+    The nominal model is the rig's reduced model at the recording's speed, sampled exactly
+    at its dt: its rigid-body modes, and the bending pairs inside the loop's control band
+    (model_band.choose_model; the paper's 8 states where the band holds none, or
+    ``n_bending`` pairs when given); theta enters through the reduced LFT (eqs. 51-52).
     """
 
-    def __init__(self, recording: Recording, params: str | tuple[str, ...]):
+    def __init__(self, recording: Recording, params: str | tuple[str, ...],
+                 n_bending: int | None = None):
         self.params = parse_param_list(params)
         self.recording = recording
         self.engine = kernels.engine_from_env()     # the likelihood path, chosen once
@@ -179,10 +183,16 @@ class ForwardModel:
                                  f"excitation group is supported, got {groups}")
         self.port = groups[0]
         self.x = np.asarray(recording.excitation[self.port], dtype=float)
-        self.reduced = reduce_pseudo_modal(full_model(rig, recording.speed_rpm))
+        ctrl = recording.controller
+        full = full_model(rig, recording.speed_rpm)
+        if n_bending is None:
+            self.reduced, self.band = choose_model(full, feedback_part(ctrl.A, ctrl.B, ctrl.C,
+                                                                       ctrl.D), dt)
+        else:
+            self.reduced = reduce_pseudo_modal(full, n_bending=n_bending)
+            self.band = None
         self.plant: UncertainPlant = lft_reduced(self.reduced, rig, self.params)
         self.dt = dt
-        ctrl = recording.controller
         Ad, Bd = zoh(self.reduced.A, self.reduced.B, dt)
         self.nominal = (Ad, Bd, self.reduced.C)
         self.fast = False
@@ -211,10 +221,7 @@ class ForwardModel:
 
     def validity_band_hz(self) -> float:
         """Half the frequency (|lambda|/2pi) of the lowest mode the reduction left out."""
-        # the reduction keeps the n_states eigenvalues of smallest modulus, so the lowest
-        # left-out mode is the next one in that order (no tolerance on recomputed poles)
-        moduli = np.sort(np.abs(self.reduced.full.poles))
-        return float(0.5 * moduli[self.reduced.n_states] / (2 * np.pi))
+        return validity_hz(self.reduced.full, self.reduced.n_states)
 
     # ------------------------------------------------------------------ plants
     def plants(self, theta: NDArray) -> tuple[NDArray, NDArray]:

@@ -21,7 +21,6 @@ import numpy as np
 from scipy import stats
 
 from bayes_amb import __version__
-from bayes_amb.discrepancy.adequacy import assess_fit
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.bounded import (
     bounded_laplace,
@@ -29,7 +28,7 @@ from bayes_amb.inference.bounded import (
     bounded_summary,
     sampled_bound_notes,
 )
-from bayes_amb.inference.doubted import with_model_error, within_band
+from bayes_amb.inference.doubted import with_model_error
 from bayes_amb.inference.estimate import (
     LogPosterior,
     MapResult,
@@ -49,6 +48,7 @@ from bayes_amb.inference.noise_check import (
 )
 from bayes_amb.inference.noise_fit import fit_noise_spectrum
 from bayes_amb.inference.offline import dual_youla_eps
+from bayes_amb.inference.pending import Doubted, PendingAdequacy
 from bayes_amb.inference.posterior import (
     approximate_row,
     draws_row,
@@ -59,6 +59,7 @@ from bayes_amb.inference.posterior import (
 )
 from bayes_amb.inference.priors import Prior, PriorSet
 from bayes_amb.inference.sampler import (
+    SamplerRun,
     chains_converged,
     initial_ball,
     run_emcee,
@@ -223,6 +224,9 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     forward = ForwardModel(recording, names)
     eps = dual_youla_eps(forward.parts, np.asarray(recording.y), np.asarray(recording.u))
     like = WhittleLikelihood(forward, eps, noise_model=opt.noise_model)
+    # the adequacy test beside this fit (pending.py): its verdict decides the sampling
+    pending = (PendingAdequacy(recording, names, priors, opt.seed, like.f_max_hz)
+               if opt.adequacy else None)
     start = start_transient(recording, forward, opt.initial_state)
     if start["fitted"]:
         like.set_initial_state(True)
@@ -241,10 +245,10 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     m, spectrum = learned_noise(post, m, opt.map_method) if opt.learn_spectrum else (m, None)
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
-    verdict = nominal = None
-    if opt.adequacy:
-        verdict, nominal = assess_fit(recording, names, priors, seed=opt.seed)
-        verdict = within_band(verdict, nominal, like.f_max_hz)
+    sampled = None
+    if pending is not None and not opt.map_only:    # sampled on speculation, stopped as
+        sampled = _sampled(post, x_map, cov, opt, stop=pending.doubted)  # soon as it doubts
+    verdict, nominal = pending.result() if pending is not None else (None, None)
     # a model that is not adequate reports the model-error posterior of the adequacy's
     # fit (with_model_error), which sampling this likelihood would not change: not sampled
     map_only = opt.map_only or (nominal is not None and nominal.model_error is not None)
@@ -283,6 +287,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         "fast_path": forward.fast,
         "excitation_port": forward.port,
         "n_bands": like.n_bands,
+        **({"model": forward.band.to_dict()} if forward.band and forward.band.n_bending else {}),
         "start_transient": start,
         "seed": opt.seed,
     }
@@ -326,25 +331,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         with_model_error(summary, nominal, opt.seed)
         summary["wall_s"] = time.perf_counter() - t0
         return _result(summary, names, m, eps, like)
-    rng = np.random.default_rng(opt.seed)
-    ndim = post.ndim
-    n_walkers = opt.walkers or max(24, 2 * ndim + 2)
-    n_walkers += n_walkers % 2
-    if n_walkers < 2 * ndim:
-        raise BayesAmbError(f"option --walkers: value {n_walkers} out of range: must be >= "
-                            f"{2 * ndim} (2 x {ndim} sampled dimensions)")
-    if opt.moves not in ("laplace", "de"):
-        raise BayesAmbError(f"option moves: unknown value {opt.moves!r}; known: laplace, de")
-    start = initial_ball(post, x_map, cov, n_walkers, rng)
-    laplace = None
-    if opt.moves == "laplace" and cov is not None:
-        laplace = (x_map[:post.p], np.asarray(cov)[:post.p, :post.p])
-        like.remember_rows(4 * n_walkers)     # the noise-only moves reuse the band sums
-    try:
-        run = run_emcee(post, start, rng, n_steps=opt.steps, max_steps=opt.max_steps,
-                        laplace=laplace, progress=opt.progress)
-    finally:
-        like.remember_rows(0)
+    run, n_walkers, laplace = sampled or _sampled(post, x_map, cov, opt)
     loglik = pointwise_log_likelihood(like, run.samples, post.p)
     attrs = {"package_version": __version__, "recording": recording.source,
              "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin, "seed": opt.seed,
@@ -380,6 +367,44 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
     return _result(summary, names, m, eps, like, posterior=dt, samples=run.samples)
+
+
+def _sampled(post: LogPosterior, x_map: np.ndarray, cov: np.ndarray | None,
+             opt: IdentifyOptions, stop: Callable[[], bool] | None = None
+             ) -> tuple[SamplerRun, int, tuple[np.ndarray, np.ndarray] | None] | None:
+    """The emcee posterior from the MAP's Laplace ball (opt.seed: the same draws whenever
+    it runs), with its walkers and Laplace proposal; None when ``stop`` said so at one of
+    the sampler's checks."""
+    like = post.likelihood
+    rng = np.random.default_rng(opt.seed)
+    ndim = post.ndim
+    n_walkers = opt.walkers or max(24, 2 * ndim + 2)
+    n_walkers += n_walkers % 2
+    if n_walkers < 2 * ndim:
+        raise BayesAmbError(f"option --walkers: value {n_walkers} out of range: must be >= "
+                            f"{2 * ndim} (2 x {ndim} sampled dimensions)")
+    if opt.moves not in ("laplace", "de"):
+        raise BayesAmbError(f"option moves: unknown value {opt.moves!r}; known: laplace, de")
+    start = initial_ball(post, x_map, cov, n_walkers, rng)
+    laplace = None
+    if opt.moves == "laplace" and cov is not None:
+        laplace = (x_map[:post.p], np.asarray(cov)[:post.p, :post.p])
+        like.remember_rows(4 * n_walkers)     # the noise-only moves reuse the band sums
+
+    def progress(done: int, target: int, tau_max: float) -> None:
+        if stop is not None and stop():
+            raise Doubted
+        if opt.progress is not None:
+            opt.progress(done, target, tau_max)
+
+    try:
+        run = run_emcee(post, start, rng, n_steps=opt.steps, max_steps=opt.max_steps,
+                        laplace=laplace, progress=progress)
+    except Doubted:
+        return None
+    finally:
+        like.remember_rows(0)
+    return run, n_walkers, laplace
 
 
 def _checked(like: WhittleLikelihood, m: MapResult, names: tuple[str, ...],

@@ -167,6 +167,23 @@ class StartTransient(Block):
 
 
 @block
+class ModelBand(Block):
+    """The reduced model the likelihood used, where it keeps bending pairs (the loop's
+    control band reaches past the rigid-body model's validity band;
+    inference/model_band.py): states, pairs kept and their frequencies (backward and
+    forward whirl, Hz), the band the likelihood uses (validity_band_hz), the highest
+    frequency at which the loop gain reaches one (control_band_hz), and the line said."""
+
+    states: int
+    bending_pairs: int
+    bending_hz: list[float]
+    validity_band_hz: float
+    control_band_hz: float
+    capped: bool
+    line: str
+
+
+@block
 class LaplaceCov(Block):
     """The Laplace covariance of theta at the MAP (normalised units), with its names."""
 
@@ -226,6 +243,7 @@ class Identification(Block):
     fast_path: Any = omitted()
     excitation_port: Any = omitted()
     n_bands: int | None = omitted()
+    model: ModelBand | None = omitted()
     start_transient: StartTransient | None = omitted()
     seed: int = 0
     adequacy: Adequacy | None = omitted()
@@ -256,6 +274,8 @@ class Identification(Block):
         """A table: each parameter's mean, sd and 90 % interval, normalised and physical,
         with the inference, the convergence and the adequacy line."""
         lines = [f"{self.inference}; converged: {self.converged}"]
+        if self.model is not None:
+            lines.append(self.model.line)
         if self.adequacy is not None:
             lines.append(self.adequacy.line)
         if self.start_transient is not None and self.start_transient.fitted:
@@ -276,7 +296,8 @@ class Identification(Block):
                  f"{p.physical_mean:.4g}",
                  f"[{p.physical_hdi90[0]:.4g}, {p.physical_hdi90[1]:.4g}]", p.unit]
                 for n, p in self.parameters.items()]
-        lines = [self.adequacy.line if self.adequacy else "",
+        lines = [self.model.line if self.model else "",
+                 self.adequacy.line if self.adequacy else "",
                  f"start transient fitted ({self.start_transient.reason})"
                  if self.start_transient is not None and self.start_transient.fitted else "",
                  self.inference_note or ""]

@@ -96,3 +96,19 @@ ENTRY = EffectEntry(
                            "mode")),
     repeatable=True, make=_make)
 FlexibleMode.entry = ENTRY
+
+
+def past_kept(candidates: tuple[Candidate, ...], kept: int) -> tuple[Candidate, ...]:
+    """The default candidates for a nominal model that already keeps bending pairs
+    1..``kept`` (the control band's, inference/model_band.py): each flexible-mode candidate
+    moved to the pair as many places past them, so that the diagnosis tries the first
+    N_PAIRS pairs the model leaves out, as it does on an 8-state model.
+
+    >>> from bayes_amb.discrepancy.library import all_candidates
+    >>> [c.location for c in past_kept(all_candidates(["flexible_mode"]), 1)]
+    ['bending pair 2', 'bending pair 3', 'bending pair 4']
+    """
+    if kept <= 0:
+        return candidates
+    return tuple(_make(_location(c.pair + kept)) if isinstance(c, FlexibleMode) else c
+                 for c in candidates)
