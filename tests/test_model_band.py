@@ -5,8 +5,6 @@ first bending frequency."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
 
@@ -20,16 +18,15 @@ from bayes_amb.inference.model_band import (
     control_band_hz,
     feedback_part,
 )
-from bayes_amb.io.controller_file import load_controller
+from bayes_amb.io.controller_file import shipped_controller
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rig import load_rig
 from bayes_amb.rotor import full_model
 from bayes_amb.simulate import SimulationConfig, simulate_recording
 
-ROSS_CONTROLLER = Path(__file__).parent / "data" / "ross_test_rig_controller.json"
-"""ROSS's own two controllers of the test rig, imported with the doubled bearing constant
-removed (controller_from_ross(..., dt=1e-4, speed_rpm=3000, scale={"A": 1/0.0062,
-"B": 1/0.0046}); tests/test_ross.py checks that import), so that this runs without ROSS."""
+# ROSS's own two controllers of the test rig, shipped (controller_from_ross(..., dt=1e-4,
+# speed_rpm=3000, scale={"A": 1/0.0062, "B": 1/0.0046}); tests/test_ross.py checks that
+# import), so that this runs without ROSS
 
 
 def _k(ctrl):
@@ -49,7 +46,7 @@ def test_the_reference_rig_keeps_the_papers_8_state_model_bit_for_bit():
 
 
 def test_the_real_test_rig_keeps_its_first_bending_pair():
-    rig, ctrl = load_rig("ross_test_rig"), load_controller(ROSS_CONTROLLER)
+    rig, ctrl = load_rig("ross_test_rig"), shipped_controller("ross_test_rig")
     full = full_model(rig, 3000.0)
     red, band = choose_model(full, _k(ctrl), 1e-4)
     # the rigid-body model is valid to 51 Hz, the loop's gain reaches one near 105 Hz
@@ -62,7 +59,7 @@ def test_the_real_test_rig_keeps_its_first_bending_pair():
 
 
 def test_no_loop_gain_keeps_the_rigid_body_model_and_an_endless_one_is_capped():
-    rig, ctrl = load_rig("ross_test_rig"), load_controller(ROSS_CONTROLLER)
+    rig, ctrl = load_rig("ross_test_rig"), shipped_controller("ross_test_rig")
     full = full_model(rig, 3000.0)
     A, B, C, D = _k(ctrl)
     _, none = choose_model(full, (A, B, 0 * C, 0 * D), 1e-4)
@@ -73,7 +70,7 @@ def test_no_loop_gain_keeps_the_rigid_body_model_and_an_endless_one_is_capped():
 
 
 def test_the_forward_model_and_the_diagnosis_candidates_follow_the_kept_pairs():
-    rig, ctrl = load_rig("ross_test_rig"), load_controller(ROSS_CONTROLLER)
+    rig, ctrl = load_rig("ross_test_rig"), shipped_controller("ross_test_rig")
     rec, _ = simulate_recording(rig, ctrl, SimulationConfig(duration=0.05, dt=1e-4, seed=1,
                                                             amplitude=0.1))
     fwd = ForwardModel(rec, ("k_Ax", "k_By"))

@@ -193,6 +193,14 @@ def test_rosss_real_rig_controllers_are_imported_and_checked():
     assert imp.spectral_radius == pytest.approx(0.9926, abs=1e-4)
     assert imp.controller.n_states > 8 and imp.zone in "ABCD"
     assert imp.controller.design["ross_scale"] == {"A": 1 / 0.0062, "B": 1 / 0.0046}
+    # the shipped copy (bayes_amb/rig/data) is this import: the same frequency response
+    from bayes_amb.control.discrete import ss_freqresp
+    from bayes_amb.io.controller_file import shipped_controller
+
+    z = np.exp(2j * np.pi * np.array([1.0, 50.0, 102.0, 400.0, 2000.0]) * 1e-4)
+    got, ship = (ss_freqresp(k.A, k.B, k.C, k.D, z) for k in (imp.controller,
+                                                             shipped_controller(rig.name)))
+    assert np.allclose(got, ship, rtol=1e-8, atol=1e-8 * np.abs(ship).max())
 
 
 def test_a_saved_rotors_pid_controllers_import_from_the_cli(tmp_path, capsys):

@@ -354,11 +354,19 @@ def bench_transient(quick: bool = False) -> Result:
     return run(quick)
 
 
+def bench_rigs(quick: bool = False) -> Result:
+    """ROSS's real test rig against the reference rig: model, likelihood, identify and
+    diagnose on the same case (bayes_amb.bench.rig_case)."""
+    from bayes_amb.bench.rig_case import bench_rigs as run
+
+    return run(quick)
+
+
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
     "simulate": bench_simulate, "map": bench_map, "diagnose": bench_diagnose,
     "cli": bench_cli, "study": bench_study, "plan": bench_plan,
-    "transient": bench_transient}
+    "transient": bench_transient, "rigs": bench_rigs}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
 """What ``bayes-amb bench`` runs without --only (the diagnosis, the CLI runs and the study

@@ -20,7 +20,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "'--only cli' (a README command in subprocesses with and without "
                        "OPENBLAS_NUM_THREADS=1) about 2; '--only study' (1000-replicate study "
                        "throughput) about 5; '--only plan' (the plan against one identification) "
-                       "under 1. BLAS threads are limited by the tool itself "
+                       "under 1; '--only rigs' (ROSS's test rig against the reference rig, "
+                       "the same case) about 4. BLAS threads are limited by the tool itself "
                        "(--threads, BAYES_AMB_THREADS).")
     p.add_argument("--only", default=None, metavar="NAME,...",
                    help="comma-separated benchmarks to run, of " + ", ".join(BENCHMARKS)
@@ -91,6 +92,13 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         r = d["transient"]
         rows.append(("transient", f"{r['fitted_s']:.1f} s, start transient fitted",
                      f"{r['noise_s']:.1f} s, taken as noise", f"{1 / r['cost']:.2f}x"))
+    if "rigs" in d:
+        r = d["rigs"]
+        rows.append(("rigs", f"test rig: diagnose {r['test_rig']['diagnose_s']:.0f} s, "
+                     f"{r['test_rig']['states']} states",
+                     f"reference rig: {r['reference']['diagnose_s']:.0f} s, "
+                     f"{r['reference']['states']} states",
+                     f"{1 / r['ratios']['diagnose_s']:.2f}x"))
     if "study" in d:
         r = d["study"]
         rows.append(("study", f"{r['n_replicates']} replicates in {r['wall_s']:.0f} s "
@@ -168,6 +176,21 @@ def _details(d: dict[str, Any]) -> list[str]:
                    f"({r['evals_fitted']} evaluations) against {r['posterior_s_noise']:.1f} s "
                    f"({r['evals_noise']}); {'converged' if r['converged'] else 'NOT converged'}"
                    f"; sd fitted / as noise: {sds}")
+    if "rigs" in d:
+        r = d["rigs"]
+        out.append(f"rigs: the same case on ROSS's test rig (its own controllers, r2) and the "
+                   f"reference rig (eta), {r['duration_s']:g} s of the full FE truth; test "
+                   f"rig / reference (target diagnose <= {r['target_diagnose_ratio']:g}x):")
+        for k in ("model_s", "eval_us", "identify_s", "diagnose_s", "diagnose_cpu_s"):
+            unit = "us" if k.endswith("_us") else "s"
+            out.append(f"  {k.rsplit('_', 1)[0]:<13} "
+                       f"{r['test_rig'][k]:>9.2f} {unit}  {r['reference'][k]:>9.2f} {unit}  "
+                       f"{r['ratios'][k]:.2f}x")
+        for side in ("test_rig", "reference"):
+            s = r[side]
+            out.append(f"  {s['rig']}: {s['states']} states, valid to {s['validity_hz']:.0f}"
+                       f" Hz; covered 8 coefficients: identify {s['covered_identify']}/8, "
+                       f"diagnose {s['covered_diagnose']}/8 ({s['verdict']})")
     if "cli" in d:
         r = d["cli"]
         out.append(f"cli: `{r['command']}`, {r['repeats']} runs per environment, interleaved;"

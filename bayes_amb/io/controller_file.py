@@ -24,6 +24,7 @@ Keys (all SI; unknown keys are rejected):
 
 from __future__ import annotations
 
+import json
 import math
 import os
 from dataclasses import dataclass, field
@@ -365,3 +366,25 @@ def check_fits_rig(ctrl: ControllerFile, n_inputs: int = 4, n_outputs: int = 4) 
             raise ControllerError(f"controller {ctrl.source}: does not fit a rig with "
                                   f"{n_inputs} inputs and {n_outputs} outputs: it has {got} "
                                   f"{what} (expected {expected})")
+
+
+SHIPPED_CONTROLLERS = ("ross_test_rig",)
+"""Controllers shipped beside their rig files in bayes_amb/rig/data/ (NAME_controller.json):
+ross_test_rig's is ROSS's own two controllers of that rig, imported with the bearing
+constant its example writes twice taken out (docs/your_rig.md, "ROSS")."""
+
+
+def shipped_controller(rig_name: str) -> ControllerFile:
+    """The controller shipped with a shipped rig.
+
+    >>> shipped_controller("ross_test_rig").kind
+    'generic'
+    """
+    from importlib import resources
+
+    if rig_name not in SHIPPED_CONTROLLERS:
+        raise ControllerError(f"shipped controller {rig_name!r}: none shipped; known: "
+                              + ", ".join(SHIPPED_CONTROLLERS))
+    text = resources.files("bayes_amb.rig").joinpath(
+        f"data/{rig_name}_controller.json").read_text()
+    return controller_from_dict(json.loads(text), f"{rig_name} (shipped)")
