@@ -49,8 +49,8 @@ class ImportDemoResult:
 
 
 def _posterior(rec) -> dict[str, dict[str, float]]:
-    p = identify(rec, ",".join(TRUTH), options=IdentifyOptions(map_only=True)).summary
-    return {n: {"mean": v["mean"], "sd": v["sd"]} for n, v in p["parameters"].items()}
+    fit = identify(rec, ",".join(TRUTH), options=IdentifyOptions(map_only=True))
+    return {n: {"mean": v.mean, "sd": v.sd} for n, v in fit.parameters.items()}
 
 
 def run_import_demo(out_dir: str | Path, seed: int = 0) -> ImportDemoResult:

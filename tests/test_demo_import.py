@@ -1,15 +1,15 @@
-"""`bayes-amb demo --import-formats`: every format identifies like the canonical CSV."""
+"""`bayes-amb demo --import-formats`: every format identifies like the canonical CSV.
+
+In the default suite (11 s): marked slow, it was not run, and the command the user guide
+gives crashed for a while unseen (it read the summary as a dict after it became typed)."""
 
 from __future__ import annotations
 
 import json
 
-import pytest
-
 from tests.helpers import run_cli
 
 
-@pytest.mark.slow
 def test_import_demo_step(tmp_path, capsys):
     code, out, err = run_cli(["demo", "--import-formats", "--out", str(tmp_path), "--json"],
                              capsys)
