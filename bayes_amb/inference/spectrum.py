@@ -409,14 +409,17 @@ def _white_fit(obj: _Objective, log10_sigma: NDArray) -> tuple[float, NDArray]:
 def _start(obj: _Objective) -> NDArray:
     """Knot values to start from: each source alone explaining a third of each band's
     power (least squares onto the knots), so a source the white fit pushed to nothing
-    (masked by a louder one at every frequency) starts where the record can move it."""
+    (masked by a louder one at every frequency) starts where the record can move it.
+    Bands whose every bin is masked (a lone bin at the running speed) have no power to
+    read and are left out of the fit."""
     nb = obj.B.shape[0]
-    power = np.trace(obj.Pb, axis1=1, axis2=2).real / obj.counts          # (nb,)
+    seen = obj.counts > 0
+    power = np.trace(obj.Pb, axis1=1, axis2=2).real / np.maximum(obj.counts, 1)   # (nb,)
     start = np.empty((12, obj.B.shape[1]))
     G = obj.G.reshape(3, 4, nb, 4, 4)
     for s in range(3):
         tr = np.trace(G[s].sum(axis=0), axis1=1, axis2=2).real * obj.n    # (nb,)
         lev = np.log(np.maximum(power / 3.0, 1e-300) / np.maximum(tr, 1e-300))
-        knots = np.linalg.lstsq(obj.B, lev, rcond=None)[0]
+        knots = np.linalg.lstsq(obj.B[seen], lev[seen], rcond=None)[0]
         start[4 * s:4 * s + 4] = knots[None, :]
     return start.ravel()

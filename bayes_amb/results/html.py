@@ -61,7 +61,8 @@ def result_html(title: str, verdict: str = "", lines: Sequence[str] = (),
     if lines:
         parts.append('<div class="lines">' + "<br/>".join(html.escape(s) for s in lines if s)
                      + "</div>")
-    parts += [table_html(h, r) for h, r in tables]
+    # a table wider than the page scrolls inside its own box (a docs page, a narrow cell)
+    parts += [f'<div style="overflow-x:auto">{table_html(h, r)}</div>' for h, r in tables]
     if figure is not None:
         parts.append(figure_img(figure))
     parts.append("</div>")
