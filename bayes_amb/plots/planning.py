@@ -41,5 +41,4 @@ def sd_against(plan: dict[str, Any], kind: str, targets: dict[str, float] | None
     ax.set_title(f"Predicted sd against {'record length' if kind == 'duration' else 'amplitude'}"
                  " (dots: the planned design)")
     ax.legend(ncol=2, fontsize=7.5)
-    fig.tight_layout()
     return fig
