@@ -60,6 +60,7 @@ def write_records(run: Path, kinds: dict[str, int], duration: float) -> None:
     from benchmarks.foreign.benchmark import _controller_file
     from benchmarks.foreign.oracle import fisher_information, spec_from_truth
 
+    run.mkdir(parents=True, exist_ok=True)
     ctrl = _controller_file(run, 1e-4)
     for j, (kind, n) in enumerate(kinds.items()):
         for i in range(n):
