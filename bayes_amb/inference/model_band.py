@@ -26,7 +26,7 @@ inside their 90 % intervals 4/8 with k = 0 (seed 1), 8/8 on all three seeds with
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numpy.typing import NDArray
@@ -123,12 +123,12 @@ def choose_model(full: FullModel, K: tuple[NDArray, NDArray, NDArray, NDArray], 
     while band.control_hz > band.validity_hz:
         k = band.n_bending + 1
         if k > MAX_PAIRS:
-            return red, ModelBand(**{**band.__dict__, "capped": True})
+            return red, replace(band, capped=True)
         try:
             nxt = reduce_pseudo_modal(full, n_bending=k)
             valid = validity_hz(full, 8 + 4 * k)
         except (ReductionError, IndexError):
-            return red, ModelBand(**{**band.__dict__, "capped": True})
+            return red, replace(band, capped=True)
         hz = tuple(float(v) for v in np.sort(np.abs(full.poles))[8:8 + 4 * k:2] / (2 * np.pi))
         red, band = nxt, ModelBand(k, valid, control_band_hz(nxt, K, dt), hz)
     return red, band

@@ -52,6 +52,7 @@ from benchmarks.foreign import ross_plant as rp
 from benchmarks.foreign.effects import Effect
 from benchmarks.foreign.habits import Habits, draw_habits, habit_signals
 from benchmarks.foreign.loop import ClosedLoop, closed_loop, read_controller, run
+from benchmarks.foreign.write import _plain
 
 FAMILIES = ("control", "actuator_lag", "unbalance", "probe_angle")
 HELD_OUT = ("probe_angle",)
@@ -289,14 +290,6 @@ def write_record(stem: str | Path, dt: float, y: NDArray, u: NDArray, r2: NDArra
             "truth": truth}
     paths["json"].write_text(json.dumps(side, indent=1, default=_plain), encoding="utf-8")
     return paths
-
-
-def _plain(o: Any) -> Any:
-    if isinstance(o, np.ndarray):
-        return o.tolist()
-    if isinstance(o, np.generic):
-        return o.item()
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
 def write_case(case: RigCase, out_dir: str | Path, name: str, rng: np.random.Generator,
