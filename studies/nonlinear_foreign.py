@@ -74,6 +74,11 @@ def score(d: Any, truth: dict[str, Any]) -> dict[str, Any]:
         lo, hi = nl.hdi90["all"]
         row["slew"] = [s, nl.estimate["all"], lo, hi]
         row["slew_inside"] = bool(lo <= s <= hi)
+    if nl is not None and nl.name == "amp_current_loop" and "amp_voltage_limit" in eff:
+        t = eff["amp_voltage_limit"]
+        row["loop"] = {k: [t[k], nl.estimate[key], *nl.hdi90[key]] for k, key in
+                       (("slew_a_per_s", "all"), ("bandwidth_hz", "bandwidth_hz"))}
+        row["loop_inside"] = all(lo <= v <= hi for v, _, lo, hi in row["loop"].values())
     return row
 
 
@@ -190,7 +195,7 @@ def main() -> None:
                 f.write(json.dumps(row) + "\n")
             print(json.dumps({k2: row[k2] for k2 in ("name", "verdict", "modelled",
                                                       "n_inside", "time_s")}
-                             | {k2: row[k2] for k2 in ("gap", "slew") if k2 in row}),
+                             | {k2: row[k2] for k2 in ("gap", "slew", "loop") if k2 in row}),
                   flush=True)
 
 

@@ -110,7 +110,8 @@ def format_report(d: Diagnosis) -> str:
     nl = d.nonlinearity
     if nl is not None:
         ps = "; ".join(f"{loc} {v:.4g} [{nl.hdi90[loc][0]:.4g}, {nl.hdi90[loc][1]:.4g}] "
-                       f"{nl.unit}" for loc, v in nl.estimate.items())
+                       f"{'Hz' if loc == 'bandwidth_hz' else nl.unit}"
+                       for loc, v in nl.estimate.items())
         lines.append(f"nonlinearity  : {nl.title}" + (f": {nl.parameter} {ps}" if ps else "")
                      + (f"; {nl.linear_range}" if nl.linear_range else ""))
     lines += [f"stand-in      : {s.line}" for s in d.stand_ins]

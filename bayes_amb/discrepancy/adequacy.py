@@ -94,7 +94,10 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None,
                                    "force law modelled (the gap and bias of the linearity "
                                    "check), with its uncertainty in their intervals",
                "slew_limit": "the coefficients were estimated with the amplifier's slew "
-                             "limit modelled, with its uncertainty in their intervals"}.get(
+                             "limit modelled, with its uncertainty in their intervals",
+               "amp_current_loop": "the coefficients were estimated with the amplifier's "
+                                   "current loop and its rate cap modelled, with their "
+                                   "uncertainty in their intervals"}.get(
             lin.values.get("modelled"), "the coefficients are unreliable")
         return Adequacy(False, "model NOT adequate: the loop is not linear (see the "
                         f"linearity check); {how}. Record again with a smaller excitation, "

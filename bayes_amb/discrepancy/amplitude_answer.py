@@ -12,6 +12,7 @@ from numpy.typing import NDArray
 from bayes_amb.discrepancy.linearity import LIMIT_SD
 from bayes_amb.discrepancy.nonlinear import (
     FORCE_LAW,
+    LOOP,
     RIG_FORCE_LAW,
     SLEW,
     TITLES,
@@ -32,7 +33,7 @@ def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
     if modelled is None:
         return None
     u = centred(u)
-    if modelled in (FORCE_LAW, SLEW, RIG_FORCE_LAW):
+    if modelled in (FORCE_LAW, SLEW, LOOP, RIG_FORCE_LAW):
         n = values["nonlinearity"]
         block = {"name": n["name"], "title": TITLES[n["name"]], "where": n["where"],
                  "parameter": n["parameter"], "unit": UNITS[n["parameter"]],
@@ -91,6 +92,20 @@ def _amplitude_answer(block: dict[str, Any], rig: Rig, u: NDArray, dt: float,
                          f"scaled by {min(1.0, i_max / rms):.2g} or less)")
             parts.append(line)
         return "; ".join(parts), derived
+    if block["name"] == LOOP:
+        rate, bw = block["estimate"]["all"], block["estimate"]["bandwidth_hz"]
+        x = float(np.exp(-2.0 * np.pi * bw * dt))
+        lag = np.zeros_like(u[0])
+        asked = np.empty_like(u)
+        for k in range(u.shape[0]):             # the rate the uncapped loop asks
+            asked[k] = 2.0 * np.pi * bw * np.abs(u[k] - lag)
+            lag = x * lag + (1.0 - x) * u[k]
+        share = float(np.mean(asked > rate))
+        return (f"the amplifier's current loop ({bw:.4g} Hz) changes the current at "
+                f"{rate:.4g} A/s at most; this record asks more on {100 * share:.2g} % of "
+                "the samples: an excitation with smaller or fewer fast steps (a lower "
+                "level, or a smoother signal than a random binary one) keeps it a linear "
+                "lag", {"limited_share": share, "bandwidth_hz": bw})
     if block["name"] == SLEW:
         rate = block["estimate"]["all"]
         steps = np.abs(np.diff(u, axis=0))

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayes_amb.discrepancy.checks import DataChecks, recompute_u
+from bayes_amb.discrepancy.current_loop import loop_screen, reprofiled
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
 from bayes_amb.discrepancy.linearity import (
     LIMIT_SD,
@@ -29,11 +30,15 @@ from bayes_amb.discrepancy.linearity import (
     flat_top_channels,
     r2_response,
 )
+from bayes_amb.discrepancy.loop_waveform import loop_defect
 from bayes_amb.discrepancy.nonlinear import (
+    LOOP,
     RIG_FORCE_LAW,
     SLEW,
     Nonlinearity,
     better_fit,
+    centred,
+    ranked,
     rig_force_law,
     screen,
     slew_defect,
@@ -63,9 +68,9 @@ class TakenIn:
 def take_in_clipping(recording: Recording, names: tuple[str, ...],
                      priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
                      parts, eps: np.ndarray, nominal: FittedModel) -> TakenIn:
-    """Look for clipping, the magnets' force law and a slew limit and, where one is
-    found, refit the nominal model with it modelled (the clip first: it is the one a
-    flat top or a limit proves)."""
+    """Look for clipping, the magnets' force law, a slew limit and a capped current loop
+    and, where one is found, refit the nominal model with it modelled (the clip first: it
+    is the one a flat top or a limit proves)."""
     d = coil_defect(recording, checks)
     clip, screened, found = None, (), None
     if d is not None:
@@ -83,8 +88,10 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
                 if better_fit(reg, ds, d):
                     clip, found, screened, d = None, slew, (slew,), ds
         else:
-            screened = tuple(screen(nominal.like, nominal.params, nominal.log10_sigma,
-                                    checks.u, checks.y, recording.rig, reg=reg))
+            screened = tuple(ranked([
+                *screen(nominal.like, nominal.params, nominal.log10_sigma, checks.u,
+                        checks.y, recording.rig, reg=reg),
+                loop_screen(reg, checks.u, recording.dt)]))
             if screened[0].found:
                 found = screened[0]
             elif (law := rig_force_law(recording.rig)) is not None:
@@ -96,6 +103,16 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
         return TakenIn(nominal, eps, clip, None, None, screened)
     raw = nominal.params.copy()
     corrected, nominal = _refit(recording, names, priors, seed, checks, eps, nominal, d)
+    if found is not None and found.name == LOOP:
+        # the loop's parameters again from the refit (the nominal fit took in part of
+        # its lag), and the fit once more at them
+        reg = Regression(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
+        again = reprofiled(found, reg, checks.u, recording.dt)
+        screened = tuple(again if n is found else n for n in screened)
+        found, d = again, again.defect(recording.rig, checks.u, checks.y, recording.dt)
+        corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
+        refit = _fit_taking_out(recording, names, priors, seed, checks, eps, nominal, d)
+        nominal = refit if np.isfinite(refit.log_post) else nominal
     shift = nominal.params - raw
     nominal.modelled_shift = shift
     if found is not None:
@@ -155,10 +172,14 @@ def _parameter_spread(recording: Recording, names: tuple[str, ...],
             for at in (lo, hi)]
         half = 0.5 * (pair[1] - pair[0])
         cov += np.outer(half, half)
-    if found.name == SLEW:
+    if found.name in (SLEW, LOOP):
         # the ramp inside the sample is held with its mean and first moment only: the
         # whole step from the cruder held mean is taken as one sd of what is left out
-        d = slew_defect(checks.u, found.estimate["all"], recording.dt, first_moment=False)
+        d = (slew_defect(checks.u, found.estimate["all"], recording.dt, first_moment=False)
+             if found.name == SLEW else
+             loop_defect(centred(checks.u), [found.estimate["all"]],
+                         [found.estimate["bandwidth_hz"]], recording.dt,
+                         first_moment=False)[0])
         step = _params_of(_fit_taking_out(recording, names, priors, seed, checks, eps,
                                           fitted, d), fitted) - fitted.params
         cov += np.outer(step, step)

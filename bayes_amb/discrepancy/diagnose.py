@@ -228,6 +228,31 @@ def _check_locations(candidates: tuple[Candidate, ...], recording: Recording) ->
                                 f"{recording.source} has nodes n1 .. n{rig.n_nodes}")
 
 
+def _search(recording: Recording, names: tuple[str, ...], priors: dict[str, Prior] | None,
+            opt: DiagnoseOptions, candidates: tuple[Candidate, ...],
+            say: Callable[[str], None]):
+    """The data checks, the nominal fit (with any nonlinearity modelled), its location and
+    the greedy search: checks, nominal, eps, location, fit quality before, the speed check
+    line, and the selection."""
+    checks, nominal, eps = nominal_assessment(recording, names, priors, opt.seed)
+    if not np.isfinite(nominal.log_post):
+        raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
+                            "likelihood anywhere in the prior range")
+    if opt.candidates is None:      # the bending pairs the nominal model does not keep
+        candidates = past_kept(candidates, nominal.forward.reduced.n_bending)
+    say("locating the mismatch")
+    loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
+                 LocateOptions(seed=opt.seed))
+    before = fit_quality(nominal, eps)
+    speed = _running_speed(nominal, loc, before["residual"])
+    pool = (*left_out_coefficients(names), *candidates)
+    sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
+                            max_effects=0 if checks.failed else opt.max_effects,
+                            candidates=pool, prescreen=opt.prescreen)
+    sel = revisit(select(nominal, sel_opt, priors, progress=say), priors, progress=say)
+    return checks, nominal, eps, loc, before, speed, sel
+
+
 @limited_threads
 def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | None = None,
              priors: dict[str, Prior] | None = None,
@@ -249,22 +274,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     _check_locations(candidates, recording)
     say = opt.progress or (lambda _: None)
     say("checking the data and fitting the nominal model over the whole band")
-    checks, nominal, eps = nominal_assessment(recording, names, priors, opt.seed)
-    if not np.isfinite(nominal.log_post):
-        raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
-                            "likelihood anywhere in the prior range")
-    if opt.candidates is None:      # the bending pairs the nominal model does not keep
-        candidates = past_kept(candidates, nominal.forward.reduced.n_bending)
-    say("locating the mismatch")
-    loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
-                 LocateOptions(seed=opt.seed))
-    before = fit_quality(nominal, eps)
-    speed = _running_speed(nominal, loc, before["residual"])
-    pool = (*left_out_coefficients(names), *candidates)
-    sel_opt = SelectOptions(log_bf_threshold=opt.log_bf_threshold,
-                            max_effects=0 if checks.failed else opt.max_effects,
-                            candidates=pool, prescreen=opt.prescreen)
-    sel = revisit(select(nominal, sel_opt, priors, progress=say), priors, progress=say)
+    checks, nominal, eps, loc, before, speed, sel = _search(
+        recording, names, priors, opt, candidates, say)
     if sel.accepted:
         say("refitting the chosen model with its own noise filters")
         sel.final = sel.accepted[-1] = own_noise_fit(sel.final)

@@ -372,7 +372,8 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
         grows = ("" if amp is None else ", the residual does not grow with the amplitude "
                  f"(p {min(amp.p.values()):.2g})")
         tested = [n for n in screened if n.source == "record"]
-        laws = ("" if not tested else ", nor a magnet force law or a slew limit (z "
+        laws = ("" if not tested else ", nor a magnet force law, a slew limit or a "
+                 "capped current loop (z "
                 + ", ".join(f"{n.z:.1f}" for n in tested) + ")")
         law = next((n for n in screened if n.source == "rig file"), None)
         if law is not None:
@@ -392,7 +393,12 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
             "slew_limit": "the amplifier's slew-rate limit: no linear physics is named, "
                           "and the coefficients are estimated with the limit modelled "
                           "(a smaller excitation, or one with fewer fast steps, keeps "
-                          "di/dt below the limit)"}.get(
+                          "di/dt below the limit)",
+            "amp_current_loop": "the amplifier's current loop with its rate capped: no "
+                                "linear physics is named (its lag is part of the loop), "
+                                "and the coefficients are estimated with the loop "
+                                "modelled (a smaller excitation, or one with fewer fast "
+                                "steps, keeps the loop a linear lag)"}.get(
         modelled, "an amplifier current limit or a probe at the end of its range: no "
                   "physics is named, and the coefficients are estimated with the limit "
                   "modelled where it can be (keep the currents below the amplifier limit "

@@ -50,6 +50,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from bayes_amb.discrepancy.linearity import Regression
+from bayes_amb.discrepancy.loop_waveform import loop_defect
 from bayes_amb.rig import Rig
 from bayes_amb.rig.force_law import (
     actuator_displacement,
@@ -62,8 +63,11 @@ FORCE_LAW = "magnet_force_law"
 RIG_FORCE_LAW = "rig_force_law"
 """How a fit took the force law in when the rig file's bias gave it (not the record)."""
 SLEW = "slew_limit"
+LOOP = "amp_current_loop"
+"""The amplifier's current loop with its rate capped (current_loop.py)."""
 TITLES = {FORCE_LAW: "magnet force law (gap and bias beyond the linearisation)",
           SLEW: "amplifier slew-rate limit (voltage limit)",
+          LOOP: "amplifier current loop with its rate capped (supply voltage limit)",
           "current_limit": "amplifier current limit"}
 ALPHA = 1e-4
 """Family-wise level of each screen (Bonferroni over its bearings or its grid)."""
@@ -199,6 +203,8 @@ class Nonlinearity:
         v = self.estimate if at is None else at
         if self.name == FORCE_LAW:
             return force_law_defect(rig, u, actuator_displacement(rig, y), v)
+        if self.name == LOOP:
+            return loop_defect(centred(u), [v["all"]], [v["bandwidth_hz"]], dt)[0]
         return slew_defect(u, v["all"], dt)
 
     def ends(self) -> list[dict[str, float]]:
@@ -215,6 +221,11 @@ class Nonlinearity:
 
     def text(self) -> str:
         """One phrase: what, where, the parameter with its interval."""
+        if self.name == LOOP:
+            (blo, bhi), (lo, hi) = self.interval90["bandwidth_hz"], self.interval90["all"]
+            return (f"{self.title}: bandwidth {self.estimate['bandwidth_hz']:.4g} Hz (90 % "
+                    f"{blo:.4g} .. {bhi:.4g}), rate capped at {self.estimate['all']:.4g} "
+                    f"A/s (90 % {lo:.4g} .. {hi:.4g})")
         parts = []
         for loc in self.where:
             e, (lo, hi) = self.estimate[loc], self.interval90[loc]
@@ -404,8 +415,13 @@ def better_fit(reg: Regression, a: NDArray, b: NDArray) -> bool:
 def screen(like, params: NDArray, log10_sigma: NDArray, u: NDArray, y: NDArray,
            rig: Rig, reg: Regression | None = None) -> list[Nonlinearity]:
     """Both screens on a fitted model's residual: the force law and the slew limit, the
-    found ones first, the larger drop of the residual sum of squares first."""
+    found ones first, the larger drop of the residual sum of squares first (ranked)."""
     reg = reg or Regression(like, params, log10_sigma, u)
-    out = [force_law_screen(reg, rig, u, y), slew_screen(reg, u, like.forward.dt)]
-    return sorted(out, key=lambda n: (not n.found, -n.rss_drop))
+    return ranked([force_law_screen(reg, rig, u, y), slew_screen(reg, u, like.forward.dt)])
+
+
+def ranked(found: list[Nonlinearity]) -> list[Nonlinearity]:
+    """Screens' results, the found ones first, the larger drop of the residual sum of
+    squares first."""
+    return sorted(found, key=lambda n: (not n.found, -n.rss_drop))
 
