@@ -27,6 +27,7 @@ from bayes_amb.discrepancy.information import information_check
 from bayes_amb.discrepancy.linearity import linearity_check
 from bayes_amb.discrepancy.locate import LocateOptions, Location, locate
 from bayes_amb.discrepancy.model_error import model_error
+from bayes_amb.discrepancy.nonlinear import Nonlinearity
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
@@ -123,7 +124,8 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None,
 
 def nominal_assessment(recording: Recording, names: tuple[str, ...],
                        priors: dict[str, Prior] | None = None, seed: int = 0,
-                       learn: bool = False) -> tuple[DataChecks, FittedModel, np.ndarray]:
+                       learn: bool = False, forced: Nonlinearity | None = None
+                       ) -> tuple[DataChecks, FittedModel, np.ndarray]:
     """Data checks (with linearity and information), eps and the nominal fit: the start
     of a diagnosis. A clipping amplifier is modelled, not absorbed (clip_model.py). With
     ``learn`` (identify's adequacy test) the noise spectrum is then learned from what is
@@ -131,14 +133,16 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
     keeps the white sources with each band's spectrum integrated out: with the learned
     spectrum its models compared named a sensor gain and two runouts, confidently, on a
     foreign record whose only colour was a band-limited force, and gave tentative names to
-    two more (of six; "unexplained" before)."""
+    two more (of six; "unexplained" before). forced: a nonlinearity found after a first
+    search, modelled from the start (take_in_clipping)."""
     fwd = ForwardModel(recording, names)
     checks = run_checks(recording, loop_poles(fwd))
     eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
     nominal = fit_nominal(recording, names, eps, priors, seed=seed, start=checks.start)
     if not np.isfinite(nominal.log_post):
         return checks, nominal, eps
-    taken = take_in_clipping(recording, names, priors, seed, checks, fwd.parts, eps, nominal)
+    taken = take_in_clipping(recording, names, priors, seed, checks, fwd.parts, eps, nominal,
+                             forced)
     checks = replace(checks, checks=(
         *checks.checks,
         linearity_check(recording, taken.clip, taken.modelled, taken.shift, taken.fitted,

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from bayes_amb.discrepancy.checks import DataChecks, recompute_u
-from bayes_amb.discrepancy.current_loop import loop_screen, reprofiled
+from bayes_amb.discrepancy.current_loop import loop_screen
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
 from bayes_amb.discrepancy.linearity import (
     LIMIT_SD,
@@ -30,14 +30,13 @@ from bayes_amb.discrepancy.linearity import (
     flat_top_channels,
     r2_response,
 )
-from bayes_amb.discrepancy.loop_waveform import loop_defect
+from bayes_amb.discrepancy.loop_model import model_loop
 from bayes_amb.discrepancy.nonlinear import (
     LOOP,
     RIG_FORCE_LAW,
     SLEW,
     Nonlinearity,
     better_fit,
-    centred,
     ranked,
     rig_force_law,
     screen,
@@ -67,13 +66,19 @@ class TakenIn:
 
 def take_in_clipping(recording: Recording, names: tuple[str, ...],
                      priors: dict[str, Prior] | None, seed: int, checks: DataChecks,
-                     parts, eps: np.ndarray, nominal: FittedModel) -> TakenIn:
+                     parts, eps: np.ndarray, nominal: FittedModel,
+                     forced: Nonlinearity | None = None) -> TakenIn:
     """Look for clipping, the magnets' force law, a slew limit and a capped current loop
     and, where one is found, refit the nominal model with it modelled (the clip first: it
-    is the one a flat top or a limit proves)."""
-    d = coil_defect(recording, checks)
+    is the one a flat top or a limit proves). forced: a nonlinearity found after a first
+    search (the capped loop behind a named lag, loop_alternative.py), modelled without
+    screening."""
+    d = None if forced is not None else coil_defect(recording, checks)
     clip, screened, found = None, (), None
-    if d is not None:
+    if forced is not None:
+        found, screened = forced, (forced,)
+        d = forced.defect(recording.rig, checks.u, checks.y, recording.dt)
+    elif d is not None:
         eps = dual_youla_eps(parts, checks.y, checks.u - d)     # the commanded current
     else:
         reg = Regression(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
@@ -102,17 +107,16 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
     if d is None:
         return TakenIn(nominal, eps, clip, None, None, screened)
     raw = nominal.params.copy()
-    corrected, nominal = _refit(recording, names, priors, seed, checks, eps, nominal, d)
     if found is not None and found.name == LOOP:
-        # the loop's parameters again from the refit (the nominal fit took in part of
-        # its lag), and the fit once more at them
-        reg = Regression(nominal.like, nominal.params, nominal.log10_sigma, checks.u)
-        again = reprofiled(found, reg, checks.u, recording.dt)
-        screened = tuple(again if n is found else n for n in screened)
-        found, d = again, again.defect(recording.rig, checks.u, checks.y, recording.dt)
-        corrected = eps - r2_response(nominal.like.forward, nominal.params, d)
-        refit = _fit_taking_out(recording, names, priors, seed, checks, eps, nominal, d)
-        nominal = refit if np.isfinite(refit.log_post) else nominal
+        # the loop is modelled with its lag exact (loop_model.py), not as a held defect
+        modelled = model_loop(recording, names, priors, checks.start, checks.u, eps,
+                              nominal, found)
+        corrected, nominal = modelled[:2]
+        screened = tuple(modelled[2] if n is found else n for n in screened)
+        shift = nominal.params[:raw.size] - raw
+        nominal.modelled_shift = np.concatenate([shift, [0.0]])
+        return TakenIn(nominal, corrected, clip, LOOP, shift, screened)
+    corrected, nominal = _refit(recording, names, priors, seed, checks, eps, nominal, d)
     shift = nominal.params - raw
     nominal.modelled_shift = shift
     if found is not None:
@@ -172,14 +176,10 @@ def _parameter_spread(recording: Recording, names: tuple[str, ...],
             for at in (lo, hi)]
         half = 0.5 * (pair[1] - pair[0])
         cov += np.outer(half, half)
-    if found.name in (SLEW, LOOP):
+    if found.name == SLEW:
         # the ramp inside the sample is held with its mean and first moment only: the
         # whole step from the cruder held mean is taken as one sd of what is left out
-        d = (slew_defect(checks.u, found.estimate["all"], recording.dt, first_moment=False)
-             if found.name == SLEW else
-             loop_defect(centred(checks.u), [found.estimate["all"]],
-                         [found.estimate["bandwidth_hz"]], recording.dt,
-                         first_moment=False)[0])
+        d = slew_defect(checks.u, found.estimate["all"], recording.dt, first_moment=False)
         step = _params_of(_fit_taking_out(recording, names, priors, seed, checks, eps,
                                           fitted, d), fitted) - fitted.params
         cov += np.outer(step, step)

@@ -58,7 +58,9 @@ from bayes_amb.discrepancy.locate import (
     merge_spans,
     synchronous_speed,
 )
+from bayes_amb.discrepancy.loop_alternative import WEIGHT_NAMED, loop_alternative, mixed
 from bayes_amb.discrepancy.model_error import model_error
+from bayes_amb.discrepancy.nonlinear import Nonlinearity
 from bayes_amb.discrepancy.revisit import revisit
 from bayes_amb.discrepancy.select import SelectOptions, select
 from bayes_amb.discrepancy.stand_ins import stand_ins
@@ -167,7 +169,8 @@ def _model_error_dict(fm: FittedModel) -> dict[str, Any] | None:
     return None if fm.model_error is None else fm.model_error.to_dict()
 
 
-def _after_from(named: FittedModel, reported: FittedModel, mixed: bool) -> str:
+def _after_from(named: FittedModel, reported: FittedModel, mixed: bool,
+                alt_weight: float | None = None) -> str:
     """How parameters_after was obtained (direct_terms.py), in one line."""
     parts = ["the named model" if named.candidates else "the nominal model"]
     if reported is not named:
@@ -177,6 +180,9 @@ def _after_from(named: FittedModel, reported: FittedModel, mixed: bool) -> str:
     if mixed:
         parts.append("averaged with the nominal model in equal parts, since the naming is "
                      "tentative")
+    if alt_weight is not None:
+        parts.append(f"mixed with the fit that models the amplifier's capped current loop "
+                     f"instead (weight {alt_weight:.2f}), which fits as well")
     return ", ".join(parts)
 
 
@@ -230,11 +236,12 @@ def _check_locations(candidates: tuple[Candidate, ...], recording: Recording) ->
 
 def _search(recording: Recording, names: tuple[str, ...], priors: dict[str, Prior] | None,
             opt: DiagnoseOptions, candidates: tuple[Candidate, ...],
-            say: Callable[[str], None]):
-    """The data checks, the nominal fit (with any nonlinearity modelled), its location and
-    the greedy search: checks, nominal, eps, location, fit quality before, the speed check
-    line, and the selection."""
-    checks, nominal, eps = nominal_assessment(recording, names, priors, opt.seed)
+            say: Callable[[str], None], forced: Nonlinearity | None = None):
+    """The data checks, the nominal fit (with any nonlinearity modelled; forced: one found
+    after a first search), its location and the greedy search: checks, nominal, eps,
+    location, fit quality before, the speed check line, and the selection."""
+    checks, nominal, eps = nominal_assessment(recording, names, priors, opt.seed,
+                                              forced=forced)
     if not np.isfinite(nominal.log_post):
         raise BayesAmbError(f"recording {recording.source}: the nominal model gives no finite "
                             "likelihood anywhere in the prior range")
@@ -276,6 +283,16 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     say("checking the data and fitting the nominal model over the whole band")
     checks, nominal, eps, loc, before, speed, sel = _search(
         recording, names, priors, opt, candidates, say)
+    alt = None
+    if sel.accepted and not checks.failed:
+        alt = loop_alternative(recording, names, priors, checks.start, checks.u, eps,
+                               nominal, sel.final)
+        if alt is not None and alt.weight >= WEIGHT_NAMED:
+            say("the actuator dynamics named are the amplifier's current loop with its "
+                "rate capped: fitting again with the loop modelled")
+            checks, nominal, eps, loc, before, speed, sel = _search(
+                recording, names, priors, opt, candidates, say, forced=alt.nonlinearity)
+            alt = None
     if sel.accepted:
         say("refitting the chosen model with its own noise filters")
         sel.final = sel.accepted[-1] = own_noise_fit(sel.final)
@@ -304,12 +321,16 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names,
                                      robust=doubted[id(fm)])
     s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
-    all_effects = effect_summaries(reported, s_fin)
+    # the nominal model's own candidates (a modelled current loop's lag) come first
+    all_effects = effect_summaries(reported, s_fin)[len(nominal.candidates):]
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
     substitutes = stand_ins(effects, nominal_physical(reported))
+    s_coef = (averaged(s_fin, s_nom, nominal.p)
+              if (unexplained["present"] or substitutes) and sel.accepted else s_fin)
+    if alt is not None:             # the capped loop fits as well: both, in their weights
+        s_coef = mixed(s_coef, draws(alt.fit, seed=opt.seed), alt.weight, len(names))
+        substitutes.append(alt.stand_in(sel.accepted[0].candidates[-1].key))
     confidence = "tentative" if unexplained["present"] or substitutes else "confident"
-    s_coef = (averaged(s_fin, s_nom, nominal.p) if confidence == "tentative" and sel.accepted
-              else s_fin)
     explanations = []
     for fm, eff in zip(sel.accepted, effects, strict=True):
         cand = fm.candidates[-1]
@@ -360,7 +381,9 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                 "log_likelihood_gain": float(sel.final.log_post - nominal.log_post)},
         "parameters_before": theta_summary(nominal, s_nom),
         "parameters_after": theta_summary(reported, s_coef),
-        "parameters_after_from": _after_from(sel.final, reported, s_coef is not s_fin),
+        "parameters_after_from": _after_from(
+            sel.final, reported, (unexplained["present"] or len(substitutes) > (alt is not None))
+            and bool(sel.accepted), None if alt is None else alt.weight),
         "direct_terms": direct,
         "nonlinearity": nonlinearity_block(
             next(c for c in checks.checks if c.name == "linearity").values,

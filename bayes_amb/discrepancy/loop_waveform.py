@@ -27,11 +27,18 @@ def _pulse_share(Q: NDArray, M1: NDArray, dt: float) -> NDArray:
 
 
 def loop_defect(u: NDArray, rates: NDArray, bandwidths_hz: NDArray, dt: float,
-                first_moment: bool = True) -> NDArray:
+                first_moment: bool = True, at_command: bool = False) -> NDArray:
     """Delivered minus commanded current (G, N, 4) for G loops (rate S A/s, bandwidth Hz;
     np.inf allowed for either), driven by the held command u (N, 4), as held samples (the
     module docstring). The loop starts at the first command. first_moment=False holds
-    each pulse's mean in its own sample (the cruder form)."""
+    each pulse's mean in its own sample (the cruder form).
+
+    at_command: the cap as a defect of the command instead, w_eff - w: the capped loop is
+    the plain lag driven by w_eff = i + clip(w - i, +-S/wb), so with the lag itself
+    modelled exactly (the library's actuator lag) only this defect is held. It is nonzero
+    while the loop ramps: w_eff - w = -sign(w - i) S (tau - t) on [0, tau] above what is
+    left at the sample's end (tau: the ramp's time in the sample), a triangle whose mean
+    S tau^2 / (2 dt) sits at tau / 3, as the slew limit's."""
     u = np.asarray(u, dtype=float)
     n = u.shape[0]
     S = np.asarray(rates, dtype=float).reshape(-1, 1)
@@ -51,6 +58,14 @@ def loop_defect(u: NDArray, rates: NDArray, bandwidths_hz: NDArray, dt: float,
         L = dt - t1
         x = np.exp(-wb * L)
         g_end = g1 * x
+        if at_command:
+            pulse = -s * S * t1 * t1 / (2.0 * dt)
+            share = np.where(t1 > 0, 0.5 - t1 / (3.0 * dt), 0.0) if first_moment else 0.0
+            d[:, k] += -s * np.maximum(a - E - S * dt, 0.0) + (1.0 - share) * pulse
+            if k:
+                d[:, k - 1] += share * pulse
+            i = u[k] - s * g_end
+            continue
         q_exp = g1 * (1.0 - x) / wb
         Q = a * t1 - 0.5 * S * t1 * t1 + q_exp - g_end * dt   # the pulse above the end
         pulse = -s * Q / dt
@@ -94,3 +109,32 @@ def asked_rate(u: NDArray, bandwidth_hz: float, dt: float) -> float:
     i_end = lfilter([1.0 - x], [1.0, -x], u, axis=0, zi=x * u[:1])[0]
     e0 = u[1:] - i_end[:-1]
     return float(2.0 * np.pi * bandwidth_hz * np.sqrt(np.mean(e0 ** 2)))
+
+
+def loop_substeps(u: NDArray, rate: float, bandwidth_hz: float, dt: float, m: int = 8
+                  ) -> NDArray:
+    """Delivered minus commanded current of one loop as exact means over m equal
+    sub-intervals of each sample (N, m, 4): within a sample the current ramps at the cap
+    while wb |w - i| > S, then approaches w exponentially (module docstring); its integral
+    is read at the sub-interval ends. np.inf is allowed for the rate (the plain lag)."""
+    u = np.asarray(u, dtype=float)
+    n = u.shape[0]
+    S = float(rate) if np.isfinite(rate) else 1e150
+    wb = 2.0 * np.pi * float(bandwidth_hz)
+    E = S / wb
+    t = np.linspace(0.0, dt, m + 1)[None, :]           # (1, m + 1)
+    h = dt / m
+    out = np.empty((n, m, 4))
+    i = u[0].copy()
+    for k in range(n):
+        e0 = u[k] - i
+        s = np.sign(e0)
+        a = np.abs(e0)
+        t1 = np.minimum(np.maximum((a - E) / S, 0.0), dt)[:, None]       # (4, 1)
+        g1 = a[:, None] - S * t1
+        tt = np.minimum(t, t1)
+        F = a[:, None] * tt - 0.5 * S * tt * tt + np.where(
+            t > t1, g1 * -np.expm1(-wb * np.maximum(t - t1, 0.0)) / wb, 0.0)
+        out[k] = (-s[:, None] * np.diff(F, axis=1) / h).T
+        i = u[k] - s * g1[:, 0] * np.exp(-wb * (dt - t1[:, 0]))
+    return out
