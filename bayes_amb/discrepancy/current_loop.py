@@ -53,10 +53,12 @@ ALPHA = 1e-4
 GAIN_RANGE = (0.5, 2.0)
 CHI2_90 = float(stats.chi2.ppf(0.9, 1))
 CAP_Z_GATE = 2.0
-"""The z the cap must reach on a named lag's residual for the model comparison to be run
-(loop_alternative.py): on a foreign record whose weak cap moved five coefficients past
-their intervals it was 2.6 with a gain of 0.93; on two plain-lag records 0.5 and 1.8 with
-gains of 0.01 and 0.13 (the gain must also lie in GAIN_RANGE)."""
+"""The z the cap must reach, in the first screen's cap stage (beside the lag) and on a
+named lag's residual, for the model comparison to be run (loop_alternative.py): on a
+foreign record whose weak cap moved five coefficients past their intervals they were 2.1
+and 2.6, with gains of 0.94 and 0.93; on two plain-lag records 1.7 and 0.8 in the first
+screen, and 1.8 and 0.5 with gains of 0.13 and 0.01 on the named lag's residual (the gain
+must also lie in GAIN_RANGE)."""
 LOOP_REL_SD = 0.01
 """Least relative sd of an estimated rate or bandwidth: the held sample with its first
 moment is this model's, not the amplifier's (whose waveform passes through the plant

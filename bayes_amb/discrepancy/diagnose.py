@@ -33,6 +33,7 @@ from bayes_amb.discrepancy.adequacy import judge, nominal_assessment
 from bayes_amb.discrepancy.amplitude_answer import nonlinearity_block
 from bayes_amb.discrepancy.balancing import balancing, check_planes
 from bayes_amb.discrepancy.checks import DataChecks
+from bayes_amb.discrepancy.current_loop import CAP_Z_GATE
 from bayes_amb.discrepancy.direct_terms import averaged, direct_companions, with_direct_terms
 from bayes_amb.discrepancy.fitstats import (
     draws,
@@ -60,7 +61,7 @@ from bayes_amb.discrepancy.locate import (
 )
 from bayes_amb.discrepancy.loop_alternative import WEIGHT_NAMED, loop_alternative, mixed
 from bayes_amb.discrepancy.model_error import model_error
-from bayes_amb.discrepancy.nonlinear import Nonlinearity
+from bayes_amb.discrepancy.nonlinear import LOOP, Nonlinearity
 from bayes_amb.discrepancy.revisit import revisit
 from bayes_amb.discrepancy.select import SelectOptions, select
 from bayes_amb.discrepancy.stand_ins import stand_ins
@@ -284,7 +285,11 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     checks, nominal, eps, loc, before, speed, sel = _search(
         recording, names, priors, opt, candidates, say)
     alt = None
-    if sel.accepted and not checks.failed:
+    lin = next(c for c in checks.checks if c.name == "linearity").values
+    hint = next((n["z"] for n in lin.get("screens", ()) if n["name"] == LOOP), 0.0)
+    if sel.accepted and not checks.failed and hint >= CAP_Z_GATE:
+        # the first screen's cap stage saw a hint of a cap beside the lag (its z, not
+        # its detection threshold): is the named lag the capped loop?
         alt = loop_alternative(recording, names, priors, checks.start, checks.u, eps,
                                nominal, sel.final)
         if alt is not None and alt.weight >= WEIGHT_NAMED:

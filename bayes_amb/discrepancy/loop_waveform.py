@@ -27,18 +27,11 @@ def _pulse_share(Q: NDArray, M1: NDArray, dt: float) -> NDArray:
 
 
 def loop_defect(u: NDArray, rates: NDArray, bandwidths_hz: NDArray, dt: float,
-                first_moment: bool = True, at_command: bool = False) -> NDArray:
+                first_moment: bool = True) -> NDArray:
     """Delivered minus commanded current (G, N, 4) for G loops (rate S A/s, bandwidth Hz;
     np.inf allowed for either), driven by the held command u (N, 4), as held samples (the
     module docstring). The loop starts at the first command. first_moment=False holds
-    each pulse's mean in its own sample (the cruder form).
-
-    at_command: the cap as a defect of the command instead, w_eff - w: the capped loop is
-    the plain lag driven by w_eff = i + clip(w - i, +-S/wb), so with the lag itself
-    modelled exactly (the library's actuator lag) only this defect is held. It is nonzero
-    while the loop ramps: w_eff - w = -sign(w - i) S (tau - t) on [0, tau] above what is
-    left at the sample's end (tau: the ramp's time in the sample), a triangle whose mean
-    S tau^2 / (2 dt) sits at tau / 3, as the slew limit's."""
+    each pulse's mean in its own sample (the cruder form)."""
     u = np.asarray(u, dtype=float)
     n = u.shape[0]
     S = np.asarray(rates, dtype=float).reshape(-1, 1)
@@ -58,14 +51,6 @@ def loop_defect(u: NDArray, rates: NDArray, bandwidths_hz: NDArray, dt: float,
         L = dt - t1
         x = np.exp(-wb * L)
         g_end = g1 * x
-        if at_command:
-            pulse = -s * S * t1 * t1 / (2.0 * dt)
-            share = np.where(t1 > 0, 0.5 - t1 / (3.0 * dt), 0.0) if first_moment else 0.0
-            d[:, k] += -s * np.maximum(a - E - S * dt, 0.0) + (1.0 - share) * pulse
-            if k:
-                d[:, k - 1] += share * pulse
-            i = u[k] - s * g_end
-            continue
         q_exp = g1 * (1.0 - x) / wb
         Q = a * t1 - 0.5 * S * t1 * t1 + q_exp - g_end * dt   # the pulse above the end
         pulse = -s * Q / dt
