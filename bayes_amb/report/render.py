@@ -306,7 +306,11 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
         bullets += _flags(run, dg, truth)
     else:
         bullets += [_estimate(n, s.parameters[n], run, truth) + "." for n in run.names]
-        if dg is not None:
+        if dg is not None and dg.nonlinearity is not None:
+            bullets.append(f"Model discrepancy: the loop is not linear: "
+                           f"{dg.nonlinearity.title}, modelled; no linear physics is named "
+                           "(see Model discrepancy).")
+        elif dg is not None:
             bullets.append("Model discrepancy: " + ("a mismatch was located but no missing "
                            "physics named" if dg.mismatch.detected
                            else "no mismatch found") + " (see Model discrepancy).")
@@ -318,9 +322,10 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
                 + f"{n}: the posterior presses against the prior bound {b:g}. The data would "
                 "move it further than the prior allows, often a sign that the model misses "
                 "an effect (see Validation)." for n, b in run.prior_bound_hits()]
-    bullets.append("The sampler converged (R-hat ≤ 1.01, ESS ≥ 400, ≥ 50 τ)."
-                   if s.converged else "The sampler did NOT converge: treat the "
-                   "intervals as provisional (see Identification).")
+    if s.sampler is not None:
+        bullets.append("The sampler converged (R-hat ≤ 1.01, ESS ≥ 400, ≥ 50 τ)."
+                       if s.converged else "The sampler did NOT converge: treat the "
+                       "intervals as provisional (see Identification).")
     bullets += list((s.identifiability or {}).get("notes", []))
     if "eng" in facts:
         ld, pk = facts["eng"]["min_logdec"], facts["eng"]["worst_peak"]
