@@ -77,7 +77,6 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
     clip, screened, found = None, (), None
     if forced is not None:
         found, screened = forced, (forced,)
-        d = forced.defect(recording.rig, checks.u, checks.y, recording.dt)
     elif d is not None:
         eps = dual_youla_eps(parts, checks.y, checks.u - d)     # the commanded current
     else:
@@ -102,10 +101,6 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
             elif (law := rig_force_law(recording.rig)) is not None:
                 found = law
                 screened = (law, *screened)
-            if found is not None:
-                d = found.defect(recording.rig, checks.u, checks.y, recording.dt)
-    if d is None:
-        return TakenIn(nominal, eps, clip, None, None, screened)
     raw = nominal.params.copy()
     if found is not None and found.name == LOOP:
         # the loop is modelled with its lag exact (loop_model.py), not as a held defect
@@ -116,6 +111,10 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
         shift = nominal.params[:raw.size] - raw
         nominal.modelled_shift = np.concatenate([shift, [0.0]])
         return TakenIn(nominal, corrected, clip, LOOP, shift, screened)
+    if found is not None and d is None:
+        d = found.defect(recording.rig, checks.u, checks.y, recording.dt)
+    if d is None:
+        return TakenIn(nominal, eps, clip, None, None, screened)
     corrected, nominal = _refit(recording, names, priors, seed, checks, eps, nominal, d)
     shift = nominal.params - raw
     nominal.modelled_shift = shift

@@ -43,7 +43,7 @@ from scipy import stats
 
 from bayes_amb.discrepancy.linearity import Regression
 from bayes_amb.discrepancy.loop_waveform import asked_rate, lag_defect, loop_defect
-from bayes_amb.discrepancy.nonlinear import LOOP, Nonlinearity
+from bayes_amb.discrepancy.nonlinear import LOOP, Nonlinearity, rss_fn
 
 BANDWIDTHS_HZ = (500.0, 750.0, 1000.0, 1500.0, 2000.0, 3000.0, 4000.0, 6000.0, 8000.0)
 """The lag stage's grid of current-loop bandwidths."""
@@ -130,10 +130,8 @@ def _cap_stage(reg: Regression, u: NDArray, dt: float, bw: float,
             continue
         Cd = reg.defect_dft(cap)
         b, z, _ = _joint(reg, [reg.rows(Cd), *lag_cols])
-        x = reg.linear_free(Cd)
-        bf, wf = reg.band_weights(x[:, None], reg.y_linear_free)
         zs.append(float(z[0])), gains.append(float(b[0]))
-        zfs.append(float(bf[0] * np.sqrt(np.sum((x * wf) ** 2))))
+        zfs.append(reg.linear_free_z(Cd))
     j = int(np.argmax(zs))
     near = [gains[k] for k in range(n_grid) if zs[k] > z_crit]
     found = bool(zs[j] > z_crit and (max(zfs) > z_crit or not linear_free) and near
@@ -173,21 +171,17 @@ def cap_stage_at(reg: Regression, u: NDArray, dt: float, bandwidth_hz: float
 
 
 def _profiled(reg: Regression, wt: NDArray, u: NDArray, dt: float,
-              centre: tuple[float, float], common: dict, taken: NDArray | None = None
-              ) -> Nonlinearity:
+              centre: tuple[float, float], common: dict) -> Nonlinearity:
     """The loop found, its bandwidth and rate profiled from ``centre`` with the gain fixed
-    at one (the whole loop taken out of the residual, the coefficients free); taken: a
-    loop defect the fit already took out (put back before the profile; the search then
-    starts on the fine grid, centre being near). The estimate starts the modelling
-    (loop_model.py), which fits the bandwidth and the rate again with the lag exact."""
-    y = reg.y if taken is None else reg.y + reg.rows(reg.defect_dft(taken))
-    Q, _ = np.linalg.qr(reg.J * wt[:, None])
+    at one (the whole loop taken out of the residual, the coefficients free). The
+    estimate starts the modelling (loop_model.py), which fits the bandwidth and the rate
+    again with the lag exact."""
+    rss_bins = rss_fn(reg, wt)
 
     def rss(d: NDArray) -> float:
-        r = (y - reg.rows(reg.defect_dft(d))) * wt
-        return float(np.sum((r - Q @ (Q.T @ r)) ** 2))
+        return rss_bins(reg.defect_dft(d))
 
-    rss_lin = rss(np.zeros_like(u))
+    rss_lin = rss_bins(None)
 
     def surface(centre: tuple[float, float], steps: NDArray) -> tuple[NDArray, NDArray]:
         """rss on a grid of log steps about centre (bandwidth, rate): points, values."""
@@ -195,7 +189,7 @@ def _profiled(reg: Regression, wt: NDArray, u: NDArray, dt: float,
         F = loop_defect(u, centre[1] * np.exp(pts[:, 1]), centre[0] * np.exp(pts[:, 0]), dt)
         return pts, np.array([rss(F[k]) for k in range(len(pts))])
 
-    for steps in ((_COARSE, _FINE) if taken is None else (_FINE,)):
+    for steps in (_COARSE, _FINE):
         for _ in range(3):              # grids until the best is inside one
             pts, vals = surface(centre, steps)
             k = int(np.argmin(vals))

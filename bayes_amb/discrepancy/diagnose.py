@@ -330,8 +330,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     all_effects = effect_summaries(reported, s_fin)[len(nominal.candidates):]
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
     substitutes = stand_ins(effects, nominal_physical(reported))
-    s_coef = (averaged(s_fin, s_nom, nominal.p)
-              if (unexplained["present"] or substitutes) and sel.accepted else s_fin)
+    with_nominal = bool((unexplained["present"] or substitutes) and sel.accepted)
+    s_coef = averaged(s_fin, s_nom, nominal.p) if with_nominal else s_fin
     if alt is not None:             # the capped loop fits as well: both, in their weights
         s_coef = mixed(s_coef, draws(alt.fit, seed=opt.seed), alt.weight, len(names))
         substitutes.append(alt.stand_in(sel.accepted[0].candidates[-1].key))
@@ -386,9 +386,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
                 "log_likelihood_gain": float(sel.final.log_post - nominal.log_post)},
         "parameters_before": theta_summary(nominal, s_nom),
         "parameters_after": theta_summary(reported, s_coef),
-        "parameters_after_from": _after_from(
-            sel.final, reported, (unexplained["present"] or len(substitutes) > (alt is not None))
-            and bool(sel.accepted), None if alt is None else alt.weight),
+        "parameters_after_from": _after_from(sel.final, reported, with_nominal,
+                                             None if alt is None else alt.weight),
         "direct_terms": direct,
         "nonlinearity": nonlinearity_block(
             next(c for c in checks.checks if c.name == "linearity").values,

@@ -130,11 +130,18 @@ class RobustWhittle(WhittleLikelihood):
                                          self.scale), mb.stable
         return dft_response(mb, self.X, self.z, xi) / self.scale, mb.stable
 
-    def for_model(self, forward: ExtendedForwardModel, theta_ref: NDArray) -> RobustWhittle:
+    def for_model(self, forward: ExtendedForwardModel, theta_ref: NDArray,
+                  eps: NDArray | None = None) -> RobustWhittle:
         """The same data, bands and prewhitening for another model of the same recording,
-        with this likelihood's noise filters held fixed (see set_noise_reference)."""
+        with this likelihood's noise filters held fixed (see set_noise_reference); eps:
+        other data (the record's eps with a modelled defect taken out) under the same
+        bands, prewhitening and scale, so that the log likelihoods compare."""
         new = copy.copy(self)
         new.forward = forward
+        if eps is not None:
+            new._eps_full = np.asarray(eps, dtype=float)
+            new.eps = new._eps_full[new.start:]
+            new._apply_prefilter()
         new.fixed_filters = self.phi_sources
         new.set_noise_reference(theta_ref)
         return new

@@ -239,7 +239,12 @@ class Regression:
         (Frisch-Waugh): the part of d that is not linear in the loop's own signals. A
         linear misfit (a lag the model lacks, which with r2 excitation is linear in the
         very currents d is cut from) cannot fake it."""
-        x = self.linear_free(self.clip_dft(limit))
+        return self.linear_free_z(self.clip_dft(limit))
+
+    def linear_free_z(self, X: NDArray) -> float:
+        """z of a defect's bins X (nf, 4) regressed on the residual with both freed of the
+        loop's own linear signals (linear_free), with band-wise weights."""
+        x = self.linear_free(X)
         b, wt = self.band_weights(x[:, None], self.y_linear_free)
         return float(b[0] * np.sqrt(np.sum((x * wt) ** 2)))
 

@@ -28,11 +28,11 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 from scipy.linalg import expm
-from scipy.signal import lfilter
 
 from bayes_amb.control.discrete import ss_response
 from bayes_amb.discrepancy.fitting import FittedModel, free_covariance, local_fit
 from bayes_amb.discrepancy.library.actuator_lag import ActuatorLag
+from bayes_amb.discrepancy.library.base import corner_hz
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.loop_waveform import loop_substeps
 from bayes_amb.discrepancy.model import ExtendedForwardModel
@@ -63,7 +63,8 @@ def _tau_ms(bandwidth_hz: float) -> float:
 
 
 def _bandwidth(fit: FittedModel) -> float:
-    return 1e3 / (2.0 * np.pi * max(fit.params[-1], 1e-9))
+    """The lag's bandwidth (Hz) at the fit (its last parameter, the time constant in ms)."""
+    return float(corner_hz(fit.params[None, -1:])[0])
 
 
 def cap_defect(u: NDArray, rate: float, bandwidth_hz: float, dt: float,
@@ -117,11 +118,7 @@ def fit_lagged(recording: Recording, names: tuple[str, ...], priors: dict[str, P
         lag_at = np.concatenate([at.params, [_tau_ms(bandwidth_hz)]])
         corrected = eps - post_lag_response(fwd, lag_at, d)
         x0 = np.concatenate([lag_at, at.log10_sigma])
-    like = base.for_model(fwd, x0[:len(fwd.params)])
-    like._eps_full = corrected
-    like.eps = corrected[like.start:]
-    w = lfilter(like.prefilter, [1.0], corrected, axis=0)[like.start:]
-    like.E = np.fft.rfft(w / like.scale, axis=0)[like.k]
+    like = base.for_model(fwd, x0[:len(fwd.params)], eps=corrected)
     post = LogPosterior(like, fwd.priors)
     x, log_post = local_fit(post, x0)
     return FittedModel((LAG,), fwd, like, post, x, log_post, cov=free_covariance(post, x))
@@ -188,13 +185,11 @@ def model_loop(recording: Recording, names: tuple[str, ...],
     bw = _bandwidth(fit)
     corrected = eps - post_lag_response(fit.like.forward, fit.params, d)
     # the rate's uncertainty in the coefficients: refits at one sd either side
-    cov = np.zeros((fit.p, fit.p))
     ends = [fit_lagged(recording, names, priors, start, eps, fit,
                        cap_defect(u, rate * np.exp(s * sd), bw, dt), base).params
             for s in (-1.0, 1.0)]
     half = 0.5 * (ends[1] - ends[0])
-    cov += np.outer(half, half)
-    fit.extra_cov = cov
+    fit.extra_cov = np.outer(half, half)
     j = fit.p - 1
     tau_sd = float(np.sqrt(max(fit.cov[j, j], 0.0))) if fit.cov is not None else 0.0
     rel_bw = max(tau_sd / max(fit.params[j], 1e-12), RATE_REL_SD)

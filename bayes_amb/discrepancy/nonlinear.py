@@ -50,7 +50,6 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from bayes_amb.discrepancy.linearity import Regression
-from bayes_amb.discrepancy.loop_waveform import loop_defect
 from bayes_amb.rig import Rig
 from bayes_amb.rig.force_law import (
     actuator_displacement,
@@ -203,8 +202,6 @@ class Nonlinearity:
         v = self.estimate if at is None else at
         if self.name == FORCE_LAW:
             return force_law_defect(rig, u, actuator_displacement(rig, y), v)
-        if self.name == LOOP:
-            return loop_defect(centred(u), [v["all"]], [v["bandwidth_hz"]], dt)[0]
         return slew_defect(u, v["all"], dt)
 
     def ends(self) -> list[dict[str, float]]:
@@ -269,7 +266,7 @@ def rig_force_law(rig: Rig) -> Nonlinearity | None:
                         source="rig file")
 
 
-def _rss_fn(reg: Regression, wt: NDArray) -> Callable[[NDArray], float]:
+def rss_fn(reg: Regression, wt: NDArray) -> Callable[[NDArray], float]:
     """Whitened residual sum of squares after a defect's bins are taken out, with the
     coefficients free (their Jacobian projected out) and fixed band weights."""
     Q, _ = np.linalg.qr(reg.J * wt[:, None])
@@ -334,7 +331,7 @@ def force_law_screen(reg: Regression, rig: Rig, u: NDArray, y: NDArray) -> Nonli
                   gain=float(b[j_best] * sb), gain_sd=float(np.sqrt(cov[j_best, j_best]) * sb))
     if not hit:
         return Nonlinearity(FORCE_LAW, False, **common)
-    rss = _rss_fn(reg, wt)
+    rss = rss_fn(reg, wt)
     gaps = {c: float((b["AB".index(c)] * scale[c]) ** -0.5) for c in hit}
     rss_lin = rss(None)
     uc, xc = centred(u), centred(x)
@@ -371,10 +368,8 @@ def slew_screen(reg: Regression, u: NDArray, dt: float) -> Nonlinearity:
         b, wt = reg.band_weights(X, reg.y)
         Xw = X * wt[:, None]
         sd = float(np.sqrt(np.linalg.pinv(Xw.T @ Xw)[0, 0]))
-        x = reg.linear_free(D)
-        bf, wf = reg.band_weights(x[:, None], reg.y_linear_free)
         zs.append(b[0] / sd)
-        zfs.append(float(bf[0] * np.sqrt(np.sum((x * wf) ** 2))))
+        zfs.append(reg.linear_free_z(D))
         betas.append(float(b[0]))
         if best is None or zs[-1] > best[0]:
             best = (zs[-1], float(r), float(b[0]), sd, wt)
@@ -385,7 +380,7 @@ def slew_screen(reg: Regression, u: NDArray, dt: float) -> Nonlinearity:
     common = dict(z=float(zmax), z_linear_free=zf, z_crit=z_crit, gain=beta, gain_sd=sd)
     if not found:
         return Nonlinearity(SLEW, False, **common)
-    rss = _rss_fn(reg, wt)
+    rss = rss_fn(reg, wt)
 
     def f(rate: float) -> float:
         return rss(reg.defect_dft(slew_defect(u, rate, dt)))
@@ -408,7 +403,7 @@ def better_fit(reg: Regression, a: NDArray, b: NDArray) -> bool:
     whitened residual sum of squares with the coefficients free, under one set of band
     weights (those of the residual on the Jacobian alone)."""
     _, wt = reg.band_weights(reg.J, reg.y)
-    rss = _rss_fn(reg, wt)
+    rss = rss_fn(reg, wt)
     return rss(reg.defect_dft(a)) < rss(reg.defect_dft(b))
 
 
