@@ -82,6 +82,33 @@ def test_linear_model_is_exact_at_its_point(case):
     assert abs(lin.value_grad(np.zeros(4), x[4:])[1][0] - g_fd[0]) > 1e-3 * abs(g_fd[0])
 
 
+def test_compiled_band_algebra_is_the_numpy_one(case):
+    """value_grad's compiled band algebra (gauss_newton_kernel.py) gives the numpy path's
+    value and gradients away from the linear model's point too, and refuses the same
+    points (a noise spectrum that is not positive definite)."""
+    rec, eps = case
+    _, like, post = build(rec, NAMES, eps)
+    x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])
+    like.set_noise_reference(x[:4])
+    lin = gn.linearise(post, x, np.arange(4))
+    _, Psi, *_ = lin._noise_terms(x[4:])
+    wt = like.nu + like.counts
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        w = np.r_[1.0, 0.05 * rng.standard_normal(4)]
+        ok, ld, gq, gs = gn.linear_terms(lin.MT, w, Psi, lin.phi, wt)
+        ok_np, ld_np, gq_np, gs_np = lin._terms_numpy(w, Psi, wt)
+        assert ok and ok_np
+        assert abs(ld - ld_np) <= 1e-11 * abs(ld_np)
+        assert np.allclose(gq, gq_np, rtol=1e-9, atol=1e-9 * np.abs(gq_np).max())
+        assert np.allclose(gs, gs_np, rtol=1e-9, atol=1e-9 * np.abs(gs_np).max())
+    bad = Psi.copy()
+    bad[0] = np.diag([-1e30, 1.0, 1.0, 1.0])
+    w = np.r_[1.0, np.zeros(4)]
+    assert not gn.linear_terms(lin.MT, w, bad, lin.phi, wt)[0]
+    assert not lin._terms_numpy(w, bad, wt)[0]
+
+
 def test_search_reaches_the_lbfgs_optimum(clean):
     rec, eps = clean
     nominal = fit_nominal(rec, NAMES, eps)

@@ -508,3 +508,101 @@ def test_the_sample_started_beside_the_adequacy_test_is_the_sample(rig, observer
     assert calls, "the speculative sampler never asked the adequacy test"
     assert np.array_equal(again.samples, plain.samples)
     assert again.parameters["k_By"].hdi90 == plain.parameters["k_By"].hdi90
+
+
+def test_the_log_likelihood_group_is_the_likelihood_at_the_draws(paper):
+    """The sampler keeps each draw's per-band log-likelihood from the evaluation that drew
+    it (emcee's blobs, sampler.run_emcee(bands=True)); they are the likelihood's own
+    pointwise values at the retained draws, evaluated again here."""
+    from bayes_amb.inference.posterior import pointwise_log_likelihood
+
+    _, res = paper
+    kept = res.posterior["log_likelihood"]["eps"].values
+    again = pointwise_log_likelihood(res.likelihood, res.samples, 1)
+    assert kept.shape == again.shape and kept.shape[-1] == res.likelihood.n_bands
+    assert np.allclose(kept, again, rtol=1e-9, atol=1e-9 * np.abs(again).max())
+
+
+def test_the_adequacy_test_gives_one_verdict_in_a_process_or_a_thread(
+        rig, observer_1ms, monkeypatch):
+    """identify's adequacy test runs in a forked process where it can (inference/pending.py)
+    and in a thread elsewhere: the same summary either way, an error in the test reaches
+    the caller, and a test no longer wanted is ended."""
+    import bayes_amb.inference.pending as pending
+
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.3}, duration=0.3, noise_rms=1e-7,
+                      seed=4)
+    opt = IdentifyOptions(map_only=True)
+    assert pending.forks()
+    forked = identify(rec, "k_By,c_By", options=opt).to_dict()
+    monkeypatch.setenv(pending.BACKEND_ENV, "thread")
+    assert not pending.forks()
+    threaded = identify(rec, "k_By,c_By", options=opt).to_dict()
+    for d in (forked, threaded):
+        d.pop("wall_s")
+        d.pop("map_wall_s")
+    assert forked == threaded and forked["adequacy"]["adequate"]
+    monkeypatch.delenv(pending.BACKEND_ENV)
+
+    def broken(*args):
+        raise ValueError("adequacy broke")
+
+    monkeypatch.setattr(pending, "_assessed", broken)
+    job = pending.PendingAdequacy(rec, ("k_By",), None, 0)
+    job.set_band(500.0)
+    with pytest.raises(ValueError, match="adequacy broke"):
+        job.result()
+    assert job.doubted()
+
+    def slow(*args):
+        import time
+        time.sleep(60)
+
+    monkeypatch.setattr(pending, "_assessed", slow)
+    job = pending.PendingAdequacy(rec, ("k_By",), None, 0)
+    proc = job._proc
+    assert proc.is_alive() and not job.doubted()
+    job.close()
+    assert not proc.is_alive()
+
+
+def test_the_adequacy_process_ends_with_a_killed_parent(tmp_path):
+    """A parent killed outright (no finally runs) leaves no adequacy process behind: the
+    kernel ends it (pending._die_with)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import sys, time\n"
+        "import bayes_amb.inference.pending as pending\n"
+        "pending._assessed = lambda *a: time.sleep(120)\n"
+        "job = pending.PendingAdequacy(None, ('k_By',), None, 0)\n"
+        "print(job._proc.pid, flush=True)\n"
+        "time.sleep(120)\n")
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE,
+                              text=True)
+    try:
+        child = int(parent.stdout.readline())
+        os.kill(child, 0)                                  # it runs
+        parent.send_signal(signal.SIGKILL)
+        parent.wait(timeout=10)
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            try:
+                os.kill(child, 0)
+            except ProcessLookupError:
+                break
+            with open(f"/proc/{child}/stat") as f:         # reaped by init, or a zombie
+                if f.read().split(") ")[1].startswith("Z"):
+                    break
+            time.sleep(0.05)
+        else:
+            os.kill(child, signal.SIGKILL)
+            raise AssertionError("the adequacy process outlived its killed parent")
+    finally:
+        if parent.poll() is None:
+            parent.kill()

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.optimize as so
 from numpy.typing import NDArray
 
+from bayes_amb.discrepancy.gauss_newton_kernel import linear_terms
 from bayes_amb.discrepancy.likelihood import P_CH, RobustWhittle
 from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.priors import Prior
@@ -124,26 +125,37 @@ class LinearModel:
     def value_grad(self, delta: NDArray, ls: NDArray) -> tuple[float, NDArray, NDArray]:
         """Linearised log posterior and its gradient along delta (cols) and log10 sigma."""
         like = self.like
-        nb = like.starts.size
         w = np.concatenate([[1.0], delta])
-        Q = (self.MT @ w).reshape(w.size, nb, P_CH, P_CH)       # Q_a = sum_c w_c M[a, c]
-        P = np.tensordot(w, Q, axes=(0, 0))
         sig2, Psi, nu_ld0, tr_psi, ok = self._noise_terms(ls)
-        s1, ld1 = np.linalg.slogdet(Psi + P)
-        if not (ok and np.all(s1.real > 0)):
-            return -np.inf, np.zeros(delta.size), np.zeros(3)
         wt = like.nu + like.counts
-        ll = float(np.sum(like._gamma_term - wt * ld1 - P_CH * like.counts * np.log(np.pi)))
+        terms = (linear_terms(self.MT, w, Psi, self.phi, wt) if like.engine.compiled
+                 else self._terms_numpy(w, Psi, wt))
+        if not (ok and terms[0]):
+            return -np.inf, np.zeros(delta.size), np.zeros(3)
+        _, wld1, tr_kq, tr_k = terms
+        ll = float(np.sum(like._gamma_term) - wld1
+                   - P_CH * np.log(np.pi) * float(np.sum(like.counts)))
         ll += nu_ld0 - 2 * P_CH * like.k.size * np.log(like.scale) + like.jacobian
         theta = self.x0[:self.post.p].copy()
         theta[self.cols] += delta
         lp = self.post.priors.log_prior(theta[None], np.asarray(ls)[None])[0]
+        g_delta = -2.0 * tr_kq + prior_gradient(self.post, theta)[self.cols]
+        g_ls = 2 * _LN10 * sig2 * (tr_psi @ like.nu - tr_k)
+        return ll + float(lp), g_delta, g_ls
+
+    def _terms_numpy(self, w: NDArray, Psi: NDArray, wt: NDArray
+                     ) -> tuple[bool, float, NDArray, NDArray]:
+        """gauss_newton_kernel.linear_terms in numpy (BAYES_AMB_KERNEL=numpy)."""
+        nb = self.like.starts.size
+        Q = (self.MT @ w).reshape(w.size, nb, P_CH, P_CH)       # Q_a = sum_c w_c M[a, c]
+        P = np.tensordot(w, Q, axes=(0, 0))
+        s1, ld1 = np.linalg.slogdet(Psi + P)
+        if not np.all(s1.real > 0):
+            return False, 0.0, np.zeros(w.size - 1), np.zeros(3)
         K = np.linalg.inv(Psi + P)
         tr_kq = np.einsum("bij,abji->ab", K, Q[1:]).real
-        g_delta = -2.0 * tr_kq @ wt + prior_gradient(self.post, theta)[self.cols]
         tr_k = np.einsum("bij,sbji->sb", K, self.phi).real
-        g_ls = 2 * _LN10 * sig2 * (tr_psi @ like.nu - tr_k @ wt)
-        return ll + float(lp), g_delta, g_ls
+        return True, float(wt @ ld1), tr_kq @ wt, tr_k @ wt
 
 
 def linearise(post: LogPosterior, x: NDArray, cols: NDArray, step: float = _STEP

@@ -52,6 +52,23 @@ class LogPosterior:
         out[~np.isfinite(out)] = -np.inf
         return out
 
+    def with_bands(self, P: NDArray) -> NDArray:
+        """(nb, 1 + n_bands): the log posterior, then the likelihood's per-band terms
+        (WhittleLikelihood.with_bands; NaN where the prior is zero), as emcee takes a
+        vectorised log probability with blobs."""
+        P = np.atleast_2d(np.asarray(P, dtype=float))
+        lp = self.priors.log_prior(P[:, :self.p], P[:, self.p:])
+        ok = np.isfinite(lp)
+        out = np.full((P.shape[0], 1 + self.likelihood.n_bands), np.nan)
+        out[:, 0] = -np.inf
+        if np.any(ok):
+            total, bands = self.likelihood.with_bands(P[ok, :self.p], P[ok, self.p:])
+            self.n_evals += int(ok.sum())
+            out[ok, 0] = lp[ok] + total
+            out[ok, 1:] = bands
+        out[~np.isfinite(out[:, 0]), 0] = -np.inf
+        return out
+
     def bounds(self) -> list[tuple[float | None, float | None]]:
         b: list[tuple[float | None, float | None]] = []
         for pr in self.priors.priors:

@@ -221,12 +221,26 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     require_excitation(recording)
     names = parse_param_list(params)
     prior_set = PriorSet.build(names, priors)
-    forward = ForwardModel(recording, names)
-    eps = dual_youla_eps(forward.parts, np.asarray(recording.y), np.asarray(recording.u))
-    like = WhittleLikelihood(forward, eps, noise_model=opt.noise_model)
     # the adequacy test beside this fit (pending.py): its verdict decides the sampling
-    pending = (PendingAdequacy(recording, names, priors, opt.seed, like.f_max_hz)
-               if opt.adequacy else None)
+    pending = PendingAdequacy(recording, names, priors, opt.seed) if opt.adequacy else None
+    try:
+        forward = ForwardModel(recording, names)
+        eps = dual_youla_eps(forward.parts, np.asarray(recording.y), np.asarray(recording.u))
+        like = WhittleLikelihood(forward, eps, noise_model=opt.noise_model)
+        if pending is not None:
+            pending.set_band(like.f_max_hz)
+        return _fitted(recording, names, prior_set, forward, eps, like, pending, opt, t0)
+    finally:
+        if pending is not None:
+            pending.close()      # a test still running when the fit failed is ended
+
+
+def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
+            forward: ForwardModel, eps: np.ndarray, like: WhittleLikelihood,
+            pending: PendingAdequacy | None, opt: IdentifyOptions, t0: float
+            ) -> Identification:
+    """identify after its likelihood is built and its adequacy test started: the MAP, the
+    noise spectrum, the Laplace approximation or the sample, and the summary."""
     start = start_transient(recording, forward, opt.initial_state)
     if start["fitted"]:
         like.set_initial_state(True)
@@ -248,6 +262,7 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     sampled = None
     if pending is not None and not opt.map_only:    # sampled on speculation, stopped as
         sampled = _sampled(post, x_map, cov, opt, stop=pending.doubted)  # soon as it doubts
+    drawn = _drawn(like, names, eps, forward, sampled, opt, recording) if sampled else None
     verdict, nominal = pending.result() if pending is not None else (None, None)
     # a model that is not adequate reports the model-error posterior of the adequacy's
     # fit (with_model_error), which sampling this likelihood would not change: not sampled
@@ -331,16 +346,9 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
         with_model_error(summary, nominal, opt.seed)
         summary["wall_s"] = time.perf_counter() - t0
         return _result(summary, names, m, eps, like)
-    run, n_walkers, laplace = sampled or _sampled(post, x_map, cov, opt)
-    loglik = pointwise_log_likelihood(like, run.samples, post.p)
-    attrs = {"package_version": __version__, "recording": recording.source,
-             "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin, "seed": opt.seed,
-             "inference": ("emcee ensemble (differential-evolution moves"
-                           + (" and Laplace independence proposals" if laplace else "")
-                           + "), walkers as chains")}
-    dt = to_datatree(names, run.samples, run.log_post, loglik, like, eps, forward.x, run.tau,
-                     attrs)
-    params_summary = summarise(dt, names, run.tau, recording.rig)
+    sampled = sampled or _sampled(post, x_map, cov, opt)
+    run, n_walkers, laplace = sampled
+    dt, params_summary = drawn or _drawn(like, names, eps, forward, sampled, opt, recording)
     noise_post = {}
     for j, (s, u) in enumerate(zip(NOISE_SOURCES, NOISE_UNITS, strict=True)):
         v = 10.0 ** run.samples[:, :, post.p + j].ravel()
@@ -367,6 +375,24 @@ def identify(recording: Recording, params: str | tuple[str, ...] | list[str],
     with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
     return _result(summary, names, m, eps, like, posterior=dt, samples=run.samples)
+
+
+def _drawn(like: WhittleLikelihood, names: tuple[str, ...], eps: np.ndarray,
+           forward: ForwardModel, sampled: tuple[SamplerRun, int, Any], opt: IdentifyOptions,
+           recording: Recording) -> tuple[Any, dict[str, dict[str, Any]]]:
+    """The sample's DataTree (with its pointwise log-likelihood) and its summary rows:
+    formed while the adequacy verdict is still coming, used when the sample stands."""
+    run, _, laplace = sampled
+    loglik = (run.bands if run.bands is not None
+              else pointwise_log_likelihood(like, run.samples, len(names)))
+    attrs = {"package_version": __version__, "recording": recording.source,
+             "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin, "seed": opt.seed,
+             "inference": ("emcee ensemble (differential-evolution moves"
+                           + (" and Laplace independence proposals" if laplace else "")
+                           + "), walkers as chains")}
+    dt = to_datatree(names, run.samples, run.log_post, loglik, like, eps, forward.x, run.tau,
+                     attrs)
+    return dt, summarise(dt, names, run.tau, recording.rig)
 
 
 def _sampled(post: LogPosterior, x_map: np.ndarray, cov: np.ndarray | None,
@@ -399,7 +425,7 @@ def _sampled(post: LogPosterior, x_map: np.ndarray, cov: np.ndarray | None,
 
     try:
         run = run_emcee(post, start, rng, n_steps=opt.steps, max_steps=opt.max_steps,
-                        laplace=laplace, progress=progress)
+                        laplace=laplace, progress=progress, bands=True)
     except Doubted:
         return None
     finally:

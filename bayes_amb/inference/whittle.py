@@ -497,5 +497,12 @@ class WhittleLikelihood:
 
     def __call__(self, theta: NDArray, log10_sigma: NDArray) -> NDArray:
         """Total log-likelihood (nb,), including the Jacobian of the eps scaling."""
-        ll = self.pointwise(theta, log10_sigma).sum(axis=1)
-        return ll - 2 * 4 * self.k.size * np.log(self.scale) + self.jacobian
+        return self.with_bands(theta, log10_sigma)[0]
+
+    def with_bands(self, theta: NDArray, log10_sigma: NDArray) -> tuple[NDArray, NDArray]:
+        """The total log-likelihood (nb,) and the per-band terms it sums (pointwise,
+        (nb, n_bands)): the sampler keeps the latter for the posterior's log_likelihood
+        group."""
+        ll = self.pointwise(theta, log10_sigma)
+        total = ll.sum(axis=1) - 2 * 4 * self.k.size * np.log(self.scale) + self.jacobian
+        return total, ll
