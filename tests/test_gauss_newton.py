@@ -83,9 +83,9 @@ def test_linear_model_is_exact_at_its_point(case):
 
 
 def test_compiled_band_algebra_is_the_numpy_one(case):
-    """value_grad's compiled band algebra (gauss_newton_kernel.py) gives the numpy path's
-    value and gradients away from the linear model's point too, and refuses the same
-    points (a noise spectrum that is not positive definite)."""
+    """value_grad's compiled band algebra (inference/hermitian_kernels.py) gives the numpy
+    path's value and gradients away from the linear model's point too, and refuses the
+    same points (a noise spectrum that is not positive definite)."""
     rec, eps = case
     _, like, post = build(rec, NAMES, eps)
     x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])

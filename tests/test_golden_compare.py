@@ -40,12 +40,12 @@ def test_rounding_passes(name, what):
 
 
 def test_a_map_estimate_moved_by_a_twentieth_of_its_sd_fails():
-    gold = _golden("control_06", "summary")
+    gold = _golden("control_force_07", "summary")
     got = copy.deepcopy(gold)
-    par = got["parameters"]["k_Ay"]
+    par = got["parameters"]["k_By"]
     par["mean"] += 5 * SD_FRACTION * par["sd"]
     diff = differences(got, gold)
-    assert len(diff) == 1 and "parameters.k_Ay.mean" in diff[0]
+    assert len(diff) == 1 and "parameters.k_By.mean" in diff[0]
     got = copy.deepcopy(gold)
     got["parameters"]["c_Bx"]["hdi90"][0] -= 0.25 * gold["parameters"]["c_Bx"]["sd"]
     assert any("c_Bx.hdi90[0]" in d for d in differences(got, gold))
@@ -55,7 +55,7 @@ def test_a_map_estimate_moved_by_a_twentieth_of_its_sd_fails():
 
 
 def test_a_sampled_estimate_is_compared_within_its_monte_carlo_error():
-    gold = _golden("control_force_07", "summary")
+    gold = _golden("control_06", "summary")
     name = "k_Ax"
     sd, ess = gold["parameters"][name]["sd"], gold["parameters"][name]["ess_bulk"]
     got = copy.deepcopy(gold)
@@ -104,6 +104,29 @@ def test_a_check_on_rounding_compares_no_p_value():
         return {"checks": [{"check": "controller", "relative_difference": diff, "p_adjusted": p}]}
     assert differences(check(1.2e-14, 0.03), check(1.5e-14, 0.07)) == []
     assert differences(check(1.2e-3, 0.03), check(1.5e-14, 0.07))
+
+
+def test_a_doubted_models_intervals_are_compared_within_a_twentieth_of_their_sd():
+    gold = _golden("probe_angle_01", "summary")
+    assert "parameters_model_only" in gold and not gold["adequacy"]["adequate"]
+    got = copy.deepcopy(gold)
+    par = got["parameters"]["c_Ay"]
+    par["mean"] += 0.03 * par["sd"]
+    assert differences(got, gold) == []
+    par["mean"] += 0.05 * par["sd"]
+    assert any("parameters.c_Ay.mean" in d for d in differences(got, gold))
+    got = copy.deepcopy(gold)                 # the model's own intervals stay at 1/100
+    own = got["parameters_model_only"]["c_Ay"]
+    own["mean"] += 0.03 * own["sd"]
+    assert any("parameters_model_only.c_Ay.mean" in d for d in differences(got, gold))
+
+
+def test_a_learned_spectrums_gains_within_a_quarter_decibel():
+    def spectrum(gain):
+        return {"noise": {"spectrum": {"gain_db": {"r1": {"By": [gain, 1.0]}}}}}
+    assert differences(spectrum(4.98), spectrum(5.10)) == []      # rounding, a flat source
+    assert differences(spectrum(0.73), spectrum(0.72)) == []
+    assert differences(spectrum(4.70), spectrum(5.10))            # a change of the spectrum
 
 
 def test_a_golden_file_is_plain_json():

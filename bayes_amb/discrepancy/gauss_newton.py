@@ -32,9 +32,9 @@ import numpy as np
 import scipy.optimize as so
 from numpy.typing import NDArray
 
-from bayes_amb.discrepancy.gauss_newton_kernel import linear_terms
 from bayes_amb.discrepancy.likelihood import P_CH, RobustWhittle
 from bayes_amb.inference.estimate import LogPosterior
+from bayes_amb.inference.hermitian_kernels import linear_terms
 from bayes_amb.inference.priors import Prior
 
 _LN10 = np.log(10.0)
@@ -145,7 +145,7 @@ class LinearModel:
 
     def _terms_numpy(self, w: NDArray, Psi: NDArray, wt: NDArray
                      ) -> tuple[bool, float, NDArray, NDArray]:
-        """gauss_newton_kernel.linear_terms in numpy (BAYES_AMB_KERNEL=numpy)."""
+        """hermitian_kernels.linear_terms in numpy (BAYES_AMB_KERNEL=numpy)."""
         nb = self.like.starts.size
         Q = (self.MT @ w).reshape(w.size, nb, P_CH, P_CH)       # Q_a = sum_c w_c M[a, c]
         P = np.tensordot(w, Q, axes=(0, 0))

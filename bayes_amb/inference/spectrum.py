@@ -52,6 +52,7 @@ from numpy.typing import NDArray
 from scipy import optimize, stats
 
 from bayes_amb.control.discrete import ss_freqresp_modal
+from bayes_amb.inference.hermitian_kernels import spectrum_terms
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS
 
 KNOTS = 32
@@ -304,22 +305,31 @@ def _second_difference(K: int) -> NDArray:
 class _Objective:
     """-log L(spectrum) + penalty over the knot values a (12 K,), at fixed band sums."""
 
-    def __init__(self, G: NDArray, Pb: NDArray, counts: NDArray, n: int, basis: NDArray):
+    def __init__(self, G: NDArray, Pb: NDArray, counts: NDArray, n: int, basis: NDArray,
+                 compiled: bool = True):
         self.G = G.reshape(12, *G.shape[2:])                  # (12, nb, 4, 4)
         self.Pb, self.counts, self.n, self.B = Pb, counts, n, basis
+        self.compiled = compiled
         self.centre: NDArray | None = None                     # (12, K): the ridge's centre
         K = basis.shape[1]
         D2 = _second_difference(K)
         self.Q = D2.T @ D2 / SMOOTH_SD**2 + np.eye(K) / RIDGE_SD**2
 
     def likelihood_terms(self, a: NDArray) -> tuple[float, NDArray]:
-        """-log L (constants dropped) and its gradient in the per-band ln intensities."""
-        lw = a.reshape(12, -1) @ self.B.T                      # (12, nb)
-        W = np.exp(lw) * self.n
+        """-log L (constants dropped) and its gradient in the per-band ln intensities:
+        hermitian_kernels.spectrum_terms, or its numpy form (terms_numpy) with
+        BAYES_AMB_KERNEL=numpy."""
+        W = np.exp(a.reshape(12, -1) @ self.B.T) * self.n       # (12, nb)
+        if self.compiled:
+            return spectrum_terms(W, self.G, self.Pb, self.counts)
+        return self.terms_numpy(W)
+
+    def terms_numpy(self, W: NDArray) -> tuple[float, NDArray]:
+        """likelihood_terms at the intensities W (12, nb), in numpy."""
         Phi = np.einsum("qb,qbij->bij", W, self.G)
         sign, logdet = np.linalg.slogdet(Phi)
         if np.any(sign.real <= 0):
-            return np.inf, np.zeros_like(lw)
+            return np.inf, np.zeros_like(W)
         Pi = np.linalg.inv(Phi)
         PiP = Pi @ self.Pb
         val = float(np.sum(self.counts * logdet) + np.sum(np.trace(PiP, axis1=1, axis2=2).real))
@@ -359,7 +369,8 @@ def learn_spectrum(like: Any, theta_ref: NDArray, log10_sigma: NDArray,
     knot_hz = knot_frequencies(f_band, 1.0 / (like.n * like.forward.dt))
     K = knot_hz.size
     B = hat_basis(np.log(f_band), np.log(knot_hz))
-    obj = _Objective(G, np.asarray(Pb[0]), counts, like.n, B)
+    compiled = bool(getattr(getattr(like, "engine", None), "compiled", True))
+    obj = _Objective(G, np.asarray(Pb[0]), counts, like.n, B, compiled)
     white, _ = _white_fit(obj, np.asarray(log10_sigma, dtype=float))
     a, learned = _smooth_fit(obj)
     lr = float(max(2.0 * (white - learned), 0.0))  # 2 x the log-likelihood gain
@@ -367,7 +378,7 @@ def learn_spectrum(like: Any, theta_ref: NDArray, log10_sigma: NDArray,
     adopted = bool(np.isfinite(learned) and stats.chi2.sf(lr, dof) < P_ADOPT)
     if cleaned and adopted:
         a, _ = _smooth_fit(_Objective(G, cleaned_band_sums(like, theta_ref, mask), counts,
-                                      like.n, B))
+                                      like.n, B, compiled))
     a = a.reshape(3, 4 * K)
     lo, hi = np.array(list(NOISE_LOG10_BOUNDS.values())).T + np.array([[0.5], [-0.5]])
     level = np.clip(a.mean(axis=1) / (2 * np.log(10.0)), lo, hi)     # log10 sigma_s

@@ -27,8 +27,11 @@ DIAGNOSED = (("current_limit", 2), ("control", 6), ("control_force", 7), ("seal"
              ("eddy_current", 6), ("actuator_gain", 0), ("sensor_gain", 1),
              ("sensor_delay", 0), ("runout", 2), ("full_truth", 4))
 # (kind, index, sampled): MAP with Laplace, and one short emcee run
-IDENTIFIED = (("control", 6, False), ("seal", 7, False), ("actuator_gain", 0, False),
-              ("probe_angle", 1, False), ("control_force", 7, True))
+# the sampled run is on a record whose every coefficient is inside its prior: a short chain
+# leaning on a bound (control_force_07's k_Ay) is not reproducible to its Monte Carlo
+# error, and its "not identified" notes flip with rounding
+IDENTIFIED = (("control", 6, True), ("seal", 7, False), ("actuator_gain", 0, False),
+              ("probe_angle", 1, False), ("control_force", 7, False))
 SAMPLED_STEPS = 300
 
 def record(work: Path, kind: str, index: int) -> Path:
