@@ -412,7 +412,8 @@ def test_a_map_pushed_past_its_prior_bound_reports_the_prior_and_says_why(rig, o
     such intervals held the truth in 2 of 7), so k_By reports its prior's interval and the
     note says the record pushes it past the prior, with the value it says. c_By keeps its
     Laplace interval; none is NaN."""
-    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.5, "c_By": 0.1}, duration=0.5)
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.5, "c_By": 0.1}, duration=0.5,
+                      noise_rms=5e-8, seed=1)
     res = identify(rec, "k_By,c_By", priors={"k_By": parse_prior("uniform(-0.8, 0.2)")},
                    options=IdentifyOptions(map_only=True, adequacy=False))
     assert res.map["k_By"] == pytest.approx(0.2, abs=1e-6)
@@ -447,7 +448,8 @@ def test_a_sampled_posterior_says_when_its_map_is_pushed_onto_a_bound(rig, obser
     """The same record and prior sampled: the run is not silent about the coefficient the
     record pushes past the prior, and reports its prior's interval (central 90 % of
     uniform(-0.8, 0.2): [-0.75, 0.15]), as --map-only does, with the sampler's R-hat."""
-    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.5, "c_By": 0.1}, duration=0.5)
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.5, "c_By": 0.1}, duration=0.5,
+                      noise_rms=5e-8, seed=1)
     res = identify(rec, "k_By,c_By", priors={"k_By": parse_prior("uniform(-0.8, 0.2)")},
                    options=IdentifyOptions(adequacy=False, steps=200))
     ident = res.identifiability

@@ -37,7 +37,7 @@ def test_a_diagnosis_shows_its_verdict_effects_coefficients_and_figure():
 
 
 def test_an_identification_shows_its_table_and_no_figure_without_draws():
-    res = Identification.from_dict(read_golden(golden_path("control", 6, "summary")))
+    res = Identification.from_dict(read_golden(golden_path("seal", 7, "summary")))
     html = _shown(res)
     assert "MAP with Laplace approximation; converged: True" in html
     assert all(f"<td>{n}</td>" in html for n in res.parameters)

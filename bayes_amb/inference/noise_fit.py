@@ -46,7 +46,10 @@ def find_lines(like: Any, theta: NDArray, log10_sigma: NDArray, speed_rpm: float
         return []
     R = R[0]
     band = np.repeat(np.arange(like.counts.size), like.counts)
-    L = np.linalg.cholesky(like.noise_spectrum(log10_sigma))[band]
+    try:
+        L = np.linalg.cholesky(like.noise_spectrum(log10_sigma))[band]
+    except np.linalg.LinAlgError:       # a noise spectrum that is not positive definite
+        return []                       # whitens nothing: no line can be read against it
     Wh = np.linalg.solve(L, R[..., None])[..., 0]                 # whitened residual bins
     q = np.sum(np.abs(Wh) ** 2, axis=1)
     f = like.k / (like.n * like.forward.dt)
@@ -83,6 +86,7 @@ def fit_noise_spectrum(like: Any, theta: NDArray, log10_sigma: NDArray, refit: R
     bins the spectrum is not learned from (the diagnosis: lines at multiples of the
     running speed, which are physics)."""
     theta, ls = np.asarray(theta, dtype=float), np.asarray(log10_sigma, dtype=float)
+    theta0, ls0 = theta.copy(), ls.copy()
     found = colour_correction(like, theta, ls, mask=mask)
     if found is None or found[0] >= P_DOUBT:
         return theta, ls, None            # as white as the sources have it: nothing to learn
@@ -101,15 +105,29 @@ def fit_noise_spectrum(like: Any, theta: NDArray, log10_sigma: NDArray, refit: R
     if found is not None and found[0] < P_DOUBT:
         base = spectrum or replace(learned, log_gain=np.zeros_like(learned.log_gain),
                                    log10_sigma=ls.copy())
-        spectrum = replace(base, colour_hz=found[1], colour=found[2],
-                           colour_log10_sigma=ls.copy(),
-                           notes=(f"the colour the sources miss (whiteness test p = "
-                                  f"{found[0]:.2g}) folded in per segment",))
-        theta, ls = _use(like, spectrum, theta, ls, refit)
+        corrected = replace(base, colour_hz=found[1], colour=found[2],
+                            colour_log10_sigma=ls.copy(),
+                            notes=(f"the colour the sources miss (whiteness test p = "
+                                   f"{found[0]:.2g}) folded in per segment",))
+        new_theta, new_ls = _use(like, corrected, theta, ls, refit)
+        if _finite(like, new_theta, new_ls):
+            spectrum, theta, ls = corrected, new_theta, new_ls
+        else:       # the correction left no positive-definite noise spectrum to fit under
+            like.set_spectrum(spectrum)
+            like.set_model_prewhitening(theta, ls)
+    if spectrum is not None and not _finite(like, theta, ls):
+        like.set_spectrum(None)         # nothing learned gives a finite likelihood here
+        like.set_model_prewhitening(theta0, ls0)
+        return theta0, ls0, None
     if spectrum is not None:
         speed = getattr(getattr(like.forward, "recording", None), "speed_rpm", None)
         spectrum = replace(spectrum, lines=tuple(find_lines(like, theta, ls, speed)))
     return theta, ls, spectrum
+
+
+def _finite(like: Any, theta: NDArray, log10_sigma: NDArray) -> bool:
+    """Whether the likelihood is finite at (theta, log10 sigma) under its spectrum."""
+    return bool(np.all(np.isfinite(like(np.atleast_2d(theta), np.atleast_2d(log10_sigma)))))
 
 
 def _use(like: Any, spectrum: LearnedSpectrum, theta: NDArray, log10_sigma: NDArray,
