@@ -56,6 +56,27 @@ def _pack(P, out):  # pragma: no cover - compiled
 
 
 @njit(cache=True, nogil=True)
+def _pack_rows(store, rows, out):  # pragma: no cover - compiled
+    # _pack of store[rows] without forming it: store (m, nbands, 4, 4), rows (nb,)
+    nbands = store.shape[1]
+    for b in range(rows.size):
+        c, l, r = b // LANES, b % LANES, rows[b]
+        for f in range(nbands):
+            for i in range(N_CH):
+                out[c, f, ROW[i][i], l] = store[r, f, i, i].real
+                for j in range(i):
+                    out[c, f, ROW[i][j], l] = store[r, f, i, j].real
+                    out[c, f, ROW[i][j] + 1, l] = store[r, f, i, j].imag
+
+
+def pack_rows(store: NDArray, rows: NDArray) -> NDArray:
+    """pack_band_sums(store[rows]) for band sums kept in a store (m, n_bands, 4, 4)."""
+    out = np.zeros((n_chunks(rows.size), store.shape[1], 16, LANES))
+    _pack_rows(store, np.ascontiguousarray(rows, dtype=np.int64), out)
+    return out
+
+
+@njit(cache=True, nogil=True)
 def _unpack(packed, out):  # pragma: no cover - compiled
     # the inverse of _pack: out (nb, nbands, 4, 4) Hermitian from its packed lower triangle
     nb, nbands = out.shape[0], out.shape[1]

@@ -421,30 +421,54 @@ class WhittleLikelihood:
         """Remember the band sums of the last n_rows distinct theta rows (0: off, the
         default). A sampler's moves of the noise intensities alone (theta kept) then cost
         the 4 x 4 algebra of the bands only. Forgotten by set_noise_reference; n_rows x
-        n_bands x 16 complex values of memory (64 kB a row at 256 bands)."""
-        self._row_sums: OrderedDict[bytes, tuple[NDArray, bool]] | None = (
+        n_bands x 16 complex values of memory (64 kB a row at 256 bands), in one store
+        whose rows the packed algebra reads in place (_row_slots, pointwise)."""
+        self._row_sums: OrderedDict[bytes, tuple[int, bool]] | None = (
             OrderedDict() if n_rows > 0 else None)
         self._row_capacity = int(n_rows)
+        self._row_store = (np.empty((n_rows, self.counts.size, 4, 4), dtype=complex)
+                           if n_rows > 0 else None)
 
-    def _band_sums_by_row(self, theta: NDArray, memo: OrderedDict[bytes, tuple[NDArray, bool]]
-                          ) -> tuple[NDArray, NDArray]:
-        """band_sums through the row memory: the rows not remembered are computed in one
-        batch (each row's P_b depends on that row only), the least recently used dropped."""
+    def _row_slots(self, theta: NDArray, memo: OrderedDict[bytes, tuple[int, bool]]
+                   ) -> tuple[NDArray, NDArray]:
+        """The store's rows holding each theta row's band sums, and their stability: the
+        rows not remembered are computed in one batch (each row's P_b depends on that row
+        only), into the slots of the least recently used."""
         prefix = self.engine.mode.encode() + id(self.forward).to_bytes(8, "little")
         keys = [prefix + row.tobytes() for row in theta]
         missing = list(dict.fromkeys(k for k in keys if k not in memo))
         if missing:
             idx = [keys.index(k) for k in missing]
             Pb, stable = self._compute_band_sums(theta[idx])
+            wanted = set(keys)
+            if len(wanted) > self._row_store.shape[0]:      # a batch wider than the memory
+                self._row_store = np.concatenate([self._row_store, np.empty(
+                    (len(wanted) - self._row_store.shape[0], *self._row_store.shape[1:]),
+                    dtype=complex)])
+            used = {v[0] for v in memo.values()}
+            free = [s for s in range(self._row_store.shape[0]) if s not in used]
             for j, k in enumerate(missing):
-                memo[k] = (Pb[j], bool(stable[j]))
-        out = []
+                if free:
+                    slot = free.pop()
+                else:                     # the least recently used not wanted now
+                    old = next(o for o in memo if o not in wanted)
+                    slot = memo.pop(old)[0]
+                self._row_store[slot] = Pb[j]
+                memo[k] = (slot, bool(stable[j]))
+        slots, stable = [], []
         for k in keys:
             memo.move_to_end(k)
-            out.append(memo[k])
-        while len(memo) > self._row_capacity:
+            slots.append(memo[k][0])
+            stable.append(memo[k][1])
+        while len(memo) > self._row_capacity:  # the slots read here stay until reused
             memo.popitem(last=False)
-        return np.stack([o[0] for o in out]), np.array([o[1] for o in out])
+        return np.array(slots), np.array(stable)
+
+    def _band_sums_by_row(self, theta: NDArray, memo: OrderedDict[bytes, tuple[int, bool]]
+                          ) -> tuple[NDArray, NDArray]:
+        """band_sums through the row memory (_row_slots)."""
+        slots, stable = self._row_slots(theta, memo)
+        return self._row_store[slots], stable
 
     def _compute_band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         if not self.engine.compiled:
@@ -466,17 +490,25 @@ class WhittleLikelihood:
         ll = self._pointwise_fused(theta, ls)
         if ll is not None:
             return ll
-        Pb, stable = self.band_sums(theta)                          # (nb, nbands, 4, 4)
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
-        if self.engine.compiled_modal:
-            logdet, quad, ok = walker_kernels.whittle_terms(sig2, ps, self.n, Pb)
+        memo = getattr(self, "_row_sums", None)
+        if memo is not None and self.engine.compiled_modal and ps.shape[0] == 3:
+            # the remembered rows' band sums, packed for the algebra from the store itself
+            slots, stable = self._row_slots(np.ascontiguousarray(theta, dtype=float), memo)
+            logdet, quad, ok = walker_kernels.whittle_terms(
+                sig2, ps, self.n, band_algebra.pack_rows(self._row_store, slots),
+                packed_sums=True)
         else:
-            Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
-            if self.engine.compiled:
-                logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
+            Pb, stable = self.band_sums(theta)                      # (nb, nbands, 4, 4)
+            if self.engine.compiled_modal:
+                logdet, quad, ok = walker_kernels.whittle_terms(sig2, ps, self.n, Pb)
             else:
-                logdet, quad, ok = _logdet_and_trace(Phi, Pb)
+                Phi = (sig2 @ ps.reshape(3, -1)).reshape(sig2.shape[0], *ps.shape[1:]) * self.n
+                if self.engine.compiled:
+                    logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
+                else:
+                    logdet, quad, ok = _logdet_and_trace(Phi, Pb)
         ll = -(self.counts * (logdet + 4 * np.log(np.pi)) + quad)
         bad = ~stable | ~np.all(ok, axis=1) | ~np.all(np.isfinite(ll), axis=1)
         ll[bad] = -np.inf
