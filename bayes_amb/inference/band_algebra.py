@@ -21,6 +21,8 @@ at fixed distances).
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -116,6 +118,24 @@ def pack_band_sources(phi_sources: NDArray) -> NDArray:
             out[:, :, ROW[i][j]] = phi_sources[:, :, i, j].real.T
             out[:, :, ROW[i][j] + 1] = phi_sources[:, :, i, j].imag.T
     return out
+
+
+_PACKED: tuple[Any, Any] = (None, None)
+"""The last noise spectra packed for _whittle_terms4, and the array they came from: a
+likelihood replaces its phi_sources (set_noise_reference, set_spectrum), never changes it
+in place, so the same object is the same spectra (a sampler's noise steps pack it once,
+not once a call)."""
+
+
+def packed_sources(phi_sources: NDArray) -> NDArray:
+    """pack_band_sources(phi_sources), remembered for the same array."""
+    global _PACKED
+    ref, packed = _PACKED
+    if ref is not phi_sources:
+        packed = pack_band_sources(
+            np.ascontiguousarray(phi_sources, np.complex128))
+        _PACKED = (phi_sources, packed)
+    return packed
 
 
 @njit(cache=True, nogil=True)

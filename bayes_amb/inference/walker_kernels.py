@@ -21,8 +21,6 @@ and 3 noise sources written out (bayes_amb.inference.band_algebra; bit for bit t
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
 from numba import njit
 from numpy.typing import NDArray
@@ -452,24 +450,6 @@ def _whittle_terms(sig2, ps, scale, P, logdet, quad, ok):  # pragma: no cover
                         quad[b, f] += 2.0 * (vr[f] * Pr[j, k, f] + vi[f] * Pi[j, k, f])
 
 
-_PACKED: tuple[Any, Any] = (None, None)
-"""The last noise spectra packed for _whittle_terms4, and the array they came from: a
-likelihood replaces its phi_sources (set_noise_reference, set_spectrum), never changes it
-in place, so the same object is the same spectra (a sampler's noise steps pack it once,
-not once a call)."""
-
-
-def packed_sources(phi_sources: NDArray) -> NDArray:
-    """band_algebra.pack_band_sources(phi_sources), remembered for the same array."""
-    global _PACKED
-    ref, packed = _PACKED
-    if ref is not phi_sources:
-        packed = band_algebra.pack_band_sources(
-            np.ascontiguousarray(phi_sources, np.complex128))
-        _PACKED = (phi_sources, packed)
-    return packed
-
-
 def whittle_terms(sig2: NDArray, phi_sources: NDArray, scale: float, P: NDArray,
                   packed_sums: bool = False) -> tuple[NDArray, NDArray, NDArray]:
     """log det Phi_b, tr(Phi_b^-1 P_b) and positive definiteness, (nb, n_bands) each, for
@@ -501,8 +481,8 @@ def whittle_terms(sig2: NDArray, phi_sources: NDArray, scale: float, P: NDArray,
                        and phi_sources.shape[0] == band_algebra.N_SRC):
         packed = P if packed_sums else band_algebra.pack_band_sums(
             np.ascontiguousarray(P, np.complex128))
-        band_algebra._whittle_terms4(sig2, packed_sources(phi_sources), float(scale),
-                                     packed, logdet, quad, ok)   # written out, the same
+        band_algebra._whittle_terms4(sig2, band_algebra.packed_sources(phi_sources),
+                                     float(scale), packed, logdet, quad, ok)  # written out
     else:
         phi_sources = np.ascontiguousarray(phi_sources, np.complex128)
         P = np.ascontiguousarray(P, np.complex128)

@@ -41,8 +41,6 @@ diagnostics of the discrepancy analysis look at the whole band.
 
 from __future__ import annotations
 
-from collections import OrderedDict
-
 import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
@@ -53,6 +51,7 @@ from bayes_amb.inference import band_algebra, kernels, walker_kernels
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
 from bayes_amb.inference.fused import FusedLikelihood
 from bayes_amb.inference.prewhitening import data_prewhitening, minimum_phase_inverse
+from bayes_amb.inference.row_memory import RowMemory
 from bayes_amb.inference.spectrum import LearnedSpectrum, fold_colour
 
 NOISE_SOURCES = ("sigma_noise", "sigma_r1", "sigma_r2")
@@ -114,7 +113,7 @@ def _logdet_and_trace(Phi: NDArray, P: NDArray) -> tuple[NDArray, NDArray, NDArr
     return logdet, quad, ok
 
 
-class WhittleLikelihood:
+class WhittleLikelihood(RowMemory):
     """log p(eps | theta, sigma) for a recording, vectorised over a batch of parameters.
 
     Parameters are passed as theta (nb, p) and log10 sigma (nb, 3).
@@ -416,59 +415,6 @@ class WhittleLikelihood:
         ll, Pb, stable, packed = out
         self._last_sums = (key, Pb, stable, packed)
         return ll
-
-    def remember_rows(self, n_rows: int) -> None:
-        """Remember the band sums of the last n_rows distinct theta rows (0: off, the
-        default). A sampler's moves of the noise intensities alone (theta kept) then cost
-        the 4 x 4 algebra of the bands only. Forgotten by set_noise_reference; n_rows x
-        n_bands x 16 complex values of memory (64 kB a row at 256 bands), in one store
-        whose rows the packed algebra reads in place (_row_slots, pointwise)."""
-        self._row_sums: OrderedDict[bytes, tuple[int, bool]] | None = (
-            OrderedDict() if n_rows > 0 else None)
-        self._row_capacity = int(n_rows)
-        self._row_store = (np.empty((n_rows, self.counts.size, 4, 4), dtype=complex)
-                           if n_rows > 0 else None)
-
-    def _row_slots(self, theta: NDArray, memo: OrderedDict[bytes, tuple[int, bool]]
-                   ) -> tuple[NDArray, NDArray]:
-        """The store's rows holding each theta row's band sums, and their stability: the
-        rows not remembered are computed in one batch (each row's P_b depends on that row
-        only), into the slots of the least recently used."""
-        prefix = self.engine.mode.encode() + id(self.forward).to_bytes(8, "little")
-        keys = [prefix + row.tobytes() for row in theta]
-        missing = list(dict.fromkeys(k for k in keys if k not in memo))
-        if missing:
-            idx = [keys.index(k) for k in missing]
-            Pb, stable = self._compute_band_sums(theta[idx])
-            wanted = set(keys)
-            if len(wanted) > self._row_store.shape[0]:      # a batch wider than the memory
-                self._row_store = np.concatenate([self._row_store, np.empty(
-                    (len(wanted) - self._row_store.shape[0], *self._row_store.shape[1:]),
-                    dtype=complex)])
-            used = {v[0] for v in memo.values()}
-            free = [s for s in range(self._row_store.shape[0]) if s not in used]
-            for j, k in enumerate(missing):
-                if free:
-                    slot = free.pop()
-                else:                     # the least recently used not wanted now
-                    old = next(o for o in memo if o not in wanted)
-                    slot = memo.pop(old)[0]
-                self._row_store[slot] = Pb[j]
-                memo[k] = (slot, bool(stable[j]))
-        slots, stable = [], []
-        for k in keys:
-            memo.move_to_end(k)
-            slots.append(memo[k][0])
-            stable.append(memo[k][1])
-        while len(memo) > self._row_capacity:  # the slots read here stay until reused
-            memo.popitem(last=False)
-        return np.array(slots), np.array(stable)
-
-    def _band_sums_by_row(self, theta: NDArray, memo: OrderedDict[bytes, tuple[int, bool]]
-                          ) -> tuple[NDArray, NDArray]:
-        """band_sums through the row memory (_row_slots)."""
-        slots, stable = self._row_slots(theta, memo)
-        return self._row_store[slots], stable
 
     def _compute_band_sums(self, theta: NDArray) -> tuple[NDArray, NDArray]:
         if not self.engine.compiled:
