@@ -76,6 +76,10 @@ def _child(conn: Connection, parent: int, args: tuple[Any, ...]) -> None:
     the parent's to handle (it ends this process, or the kernel does when it dies)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with(parent)
+    # the process's own streams: a notebook's sys.stderr is a socket the kernel's threads
+    # flush, and those threads are not in a forked process (a warning goes to fd 2)
+    sys.stdout = sys.__stdout__ or sys.stdout
+    sys.stderr = sys.__stderr__ or sys.stderr
     try:
         out: tuple[str, Any] = ("ok", _assessed(*args))
     except Exception as exc:  # every failure goes back to the caller
