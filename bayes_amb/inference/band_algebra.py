@@ -44,22 +44,9 @@ def n_chunks(nb: int) -> int:
 
 
 @njit(cache=True, nogil=True)
-def _pack(P, out):  # pragma: no cover - compiled
-    # P (nb, nbands, 4, 4) complex -> out (chunks, nbands, 16, LANES): the lower triangle
-    nb, nbands = P.shape[0], P.shape[1]
-    for b in range(nb):
-        c, l = b // LANES, b % LANES
-        for f in range(nbands):
-            for i in range(N_CH):
-                out[c, f, ROW[i][i], l] = P[b, f, i, i].real
-                for j in range(i):
-                    out[c, f, ROW[i][j], l] = P[b, f, i, j].real
-                    out[c, f, ROW[i][j] + 1, l] = P[b, f, i, j].imag
-
-
-@njit(cache=True, nogil=True)
 def _pack_rows(store, rows, out):  # pragma: no cover - compiled
-    # _pack of store[rows] without forming it: store (m, nbands, 4, 4), rows (nb,)
+    # store[rows] (nb, nbands, 4, 4) complex -> out (chunks, nbands, 16, LANES): the lower
+    # triangle, read in place from a store (m, nbands, 4, 4)
     nbands = store.shape[1]
     for b in range(rows.size):
         c, l, r = b // LANES, b % LANES, rows[b]
@@ -80,7 +67,7 @@ def pack_rows(store: NDArray, rows: NDArray) -> NDArray:
 
 @njit(cache=True, nogil=True)
 def _unpack(packed, out):  # pragma: no cover - compiled
-    # the inverse of _pack: out (nb, nbands, 4, 4) Hermitian from its packed lower triangle
+    # the inverse of _pack_rows: out (nb, nbands, 4, 4) Hermitian from its packed lower triangle
     nb, nbands = out.shape[0], out.shape[1]
     for b in range(nb):
         c, l = b // LANES, b % LANES
@@ -95,9 +82,7 @@ def _unpack(packed, out):  # pragma: no cover - compiled
 
 def pack_band_sums(P: NDArray) -> NDArray:
     """Band sums P_b (nb, n_bands, 4, 4) packed for :func:`_whittle_terms4`."""
-    out = np.zeros((n_chunks(P.shape[0]), P.shape[1], 16, LANES))
-    _pack(np.ascontiguousarray(P, np.complex128), out)
-    return out
+    return pack_rows(np.ascontiguousarray(P, np.complex128), np.arange(P.shape[0]))
 
 
 def unpack_band_sums(packed: NDArray, nb: int) -> NDArray:

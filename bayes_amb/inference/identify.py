@@ -53,7 +53,6 @@ from bayes_amb.inference.posterior import (
     approximate_row,
     draws_row,
     identifiability,
-    pointwise_log_likelihood,
     summarise,
     to_datatree,
 )
@@ -383,8 +382,7 @@ def _drawn(like: WhittleLikelihood, names: tuple[str, ...], eps: np.ndarray,
     """The sample's DataTree (with its pointwise log-likelihood) and its summary rows:
     formed while the adequacy verdict is still coming, used when the sample stands."""
     run, _, laplace = sampled
-    loglik = (run.bands if run.bands is not None
-              else pointwise_log_likelihood(like, run.samples, len(names)))
+    loglik = run.bands            # kept by the sampler (run_emcee(bands=True))
     attrs = {"package_version": __version__, "recording": recording.source,
              "n_steps": run.n_steps, "burn": run.burn, "thin": run.thin, "seed": opt.seed,
              "inference": ("emcee ensemble (differential-evolution moves"

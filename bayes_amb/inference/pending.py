@@ -134,12 +134,16 @@ class PendingAdequacy:
         return self._read
 
     def _done(self, wait: bool) -> bool:
-        """Whether the outcome is in (receiving it from the process if it has come)."""
+        """Whether the outcome is in, as ("ok", (verdict, fit)) or ("error", exception):
+        taken from the thread, or received from the process if it has come."""
+        if self._out is not None:
+            return True
         if self._future is not None:
-            if wait:
-                self._future.exception()
-            return self._future.done()
-        if self._out is None and (wait or self._conn.poll()):
+            if wait or self._future.done():
+                exc = self._future.exception()
+                self._out = ("error", exc) if exc is not None else ("ok",
+                                                                      self._future.result())
+        elif wait or self._conn.poll():
             try:
                 self._out = self._conn.recv()
             except EOFError:                 # ended without a verdict: run it here
@@ -155,18 +159,12 @@ class PendingAdequacy:
         the test failed (its error is raised by result()); False while it runs."""
         if not self._done(wait=False):
             return False
-        if self._future is not None:
-            if self._future.exception() is not None:
-                return True
-            return self._in_band(self._future.result())[1].model_error is not None
         kind, value = self._out  # type: ignore[misc]
         return kind != "ok" or self._in_band(value)[1].model_error is not None
 
     def result(self) -> tuple[Any, Any]:
         """(verdict, nominal fit), waiting for them."""
         self._done(wait=True)
-        if self._future is not None:
-            return self._in_band(self._future.result())
         kind, value = self._out  # type: ignore[misc]
         if kind != "ok":
             raise value

@@ -439,7 +439,8 @@ class WhittleLikelihood(RowMemory):
         sig2 = 10.0 ** (2 * ls)
         ps = self.phi_sources
         memo = getattr(self, "_row_sums", None)
-        if memo is not None and self.engine.compiled_modal and ps.shape[0] == 3:
+        if (memo is not None and self.engine.compiled_modal
+                and ps.shape[0] == band_algebra.N_SRC):
             # the remembered rows' band sums, packed for the algebra from the store itself
             slots, stable = self._row_slots(np.ascontiguousarray(theta, dtype=float), memo)
             logdet, quad, ok = walker_kernels.whittle_terms(
