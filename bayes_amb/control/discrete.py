@@ -6,6 +6,8 @@ import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
 
+from bayes_amb.control.schur_response import schur_freqresp
+
 
 def zoh(A: NDArray, B: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     """Exact ZOH discretisation: (Ad, Bd) = (e^{A dt}, int_0^dt e^{A s} ds B).
@@ -61,7 +63,8 @@ def ss_freqresp_modal(A: NDArray, B: NDArray, C: NDArray, D: NDArray | None, z: 
 
     O(n) per point instead of an n x n solve (the noise filters of the whole-band
     likelihood, 10^4 points). Its rounding grows with the condition number of V: above
-    max_cond (a nearly defective A) it falls back to the solve.
+    max_cond (a nearly defective A: a controller's repeated poles) it falls back to the
+    complex Schur form (schur_response.py), O(n^2) per point and backward stable.
 
     Examples
     --------
@@ -76,7 +79,7 @@ def ss_freqresp_modal(A: NDArray, B: NDArray, C: NDArray, D: NDArray | None, z: 
         return ss_freqresp(A, B, C, D, z)
     lam, V = np.linalg.eig(A)
     if not np.all(np.isfinite(lam)) or np.linalg.cond(V) > max_cond:
-        return ss_freqresp(A, B, C, D, z)
+        return schur_freqresp(A, B, C, D, z)
     Bm = np.linalg.solve(V, B.astype(complex))                      # (n, m)
     Cm = C @ V                                                       # (p, n)
     inv = 1.0 / (z[:, None] - lam[None, :])                          # (n_z, n)
