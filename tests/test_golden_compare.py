@@ -52,6 +52,13 @@ def test_a_map_estimate_moved_by_a_twentieth_of_its_sd_fails():
     got = copy.deepcopy(gold)
     got["parameters"]["c_Bx"]["sd"] *= 1.05
     assert any("c_Bx.sd" in d for d in differences(got, gold))
+    # the map block on the same scale: an estimate near zero moves by a few thousandths of
+    # its sd with rounding (c_Ax 0.0547 against 0.0554, sd 0.2), not by a hundredth
+    got = copy.deepcopy(gold)
+    got["map"]["c_Ax"] += 0.5 * SD_FRACTION * gold["parameters"]["c_Ax"]["sd"]
+    assert differences(got, gold) == []
+    got["map"]["c_Ax"] += SD_FRACTION * gold["parameters"]["c_Ax"]["sd"]
+    assert any(".map.c_Ax" in d for d in differences(got, gold))
 
 
 def test_a_sampled_estimate_is_compared_within_its_monte_carlo_error():
@@ -63,6 +70,19 @@ def test_a_sampled_estimate_is_compared_within_its_monte_carlo_error():
     assert differences(got, gold) == []
     got["parameters"][name]["mean"] += 0.5 * sd                # half a posterior sd
     assert any(f"parameters.{name}.mean" in d for d in differences(got, gold))
+
+
+def test_a_sampler_count_moves_by_its_ceiling_not_by_more():
+    """burn is ceil(2 tau): a step either way is rounding, three steps are a changed chain."""
+    gold = _golden("control_06", "summary")
+    got = copy.deepcopy(gold)
+    got["sampler"]["burn"] = gold["sampler"]["burn"] - 1
+    assert differences(got, gold) == []
+    got["sampler"]["burn"] = gold["sampler"]["burn"] + 3
+    assert any("sampler.burn" in d for d in differences(got, gold))
+    got = copy.deepcopy(gold)
+    got["sampler"]["steps"] = gold["sampler"]["steps"] + 50     # a count that is not ceiled
+    assert any("sampler.steps" in d for d in differences(got, gold))
 
 
 def test_words_names_and_verdicts_are_exact():

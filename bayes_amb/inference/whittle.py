@@ -45,7 +45,7 @@ import numpy as np
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
-from bayes_amb.control.discrete import ss_freqresp, ss_freqresp_modal
+from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference import band_algebra, kernels, walker_kernels
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
@@ -173,7 +173,7 @@ class WhittleLikelihood(RowMemory):
         """Residual power density of the noise model at (theta_ref, sigma), mean over the
         channels: trace(Phi(w)) / 4 on a uniform grid of n_grid points over [0, pi]."""
         A, B, C, D = self.forward.noise_system(np.asarray(theta_ref, dtype=float))
-        H = ss_freqresp(A, B, C, D, np.exp(1j * np.pi * np.linspace(0.0, 1.0, n_grid)))
+        H = ss_freqresp_modal(A, B, C, D, np.exp(1j * np.pi * np.linspace(0.0, 1.0, n_grid)))
         sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
         gain = np.abs(H) ** 2                                        # (n_grid, 4, 12)
         f = np.linspace(0.0, 0.5 / self.forward.dt, n_grid)

@@ -78,6 +78,10 @@ SAMPLER_DIAGNOSTICS = frozenset({"ess_bulk", "ess_tail", "tau"})
 MC_SECTIONS = ("sampler", "noise.check.sd_ratio")
 """Sections of a sampled run's file computed from the chain, compared to the Monte Carlo
 relative error z / sqrt(ESS)."""
+CEILED_COUNTS = frozenset({"burn", "thin"})
+"""The sampler's counts taken as the ceiling of a multiple of tau (sampler._burn_thin): a
+Monte Carlo estimate rounded up, so one step more or less is its rounding (burn 8 against
+9 where 2 tau is 8.6 on one CPU and 8.0x on another)."""
 _NUMBER = re.compile(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
 
 
@@ -89,6 +93,9 @@ class Context:
     monte_carlo: bool = False
     ess: float = math.inf
     model_error: bool = False
+    map_sd: tuple[tuple[str, float], ...] = ()
+    """Each parameter's reported sd (its own model's where a model error widened the
+    reported one): the scale of the ``map`` block's estimates."""
 
 
 def context_of(golden: dict[str, Any]) -> Context:
@@ -97,11 +104,14 @@ def context_of(golden: dict[str, Any]) -> Context:
     ``parameters_model_only`` beside a verdict that is not adequate."""
     doubted = ("parameters_model_only" in golden
                and golden.get("adequacy", {}).get("adequate") is False)
+    own = golden.get("parameters_model_only") or golden.get("parameters") or {}
+    map_sd = tuple((n, abs(float(v["sd"]))) for n, v in own.items()
+                   if isinstance(v, dict) and _is_number(v.get("sd")) and v["sd"])
     if "sampler" not in golden:
-        return Context(model_error=doubted)
+        return Context(model_error=doubted, map_sd=map_sd)
     ess = [float(v["ess_bulk"]) for v in golden.get("parameters", {}).values()
            if isinstance(v, dict) and isinstance(v.get("ess_bulk"), (int, float))]
-    return Context(True, max(min(ess, default=100.0), 1.0), doubted)
+    return Context(True, max(min(ess, default=100.0), 1.0), doubted, map_sd)
 
 
 def differences(got: Any, golden: Any, ctx: Context | None = None) -> list[str]:
@@ -292,8 +302,13 @@ def _diff(a: Any, b: Any, where: str, ctx: Context) -> list[str]:
             return _numbers(a, b, where, NATS + RTOL * abs(b))
         if ".noise.spectrum.gain_db." in where:
             return _numbers(a, b, where, GAIN_DB)
+        sd = dict(ctx.map_sd).get(key) if where == f".map.{key}" else None
+        if sd is not None:                     # the MAP, on its parameter's sd scale
+            return _numbers(a, b, where, SD_FRACTION * sd)
         rtol = RTOL
         if ctx.monte_carlo and any(where.startswith("." + s) for s in MC_SECTIONS):
             rtol = max(RTOL, Z_MC / math.sqrt(ctx.ess))
+            if key in CEILED_COUNTS:
+                return _numbers(a, b, where, rtol * abs(b) + 1)
         return _numbers(a, b, where, rtol * abs(b))
     return [] if a == b else [f"{where}: {a!r} != {b!r}"]
