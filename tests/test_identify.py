@@ -485,6 +485,28 @@ def test_structure_only_above_identifys_band_leaves_its_model_adequate():
         assert within_band(kept, fit, 513.0) is kept and fit.model_error == "widened"
 
 
+def test_a_model_error_the_test_left_out_is_formed_for_a_wider_band(monkeypatch):
+    """The adequacy test leaves the model error out where its structure lies only above the
+    model's validity band (assess_fit's band_hz); read for a band that holds the structure,
+    the verdict stays not adequate and the model error is formed then."""
+    from types import SimpleNamespace
+
+    import bayes_amb.inference.pending as pending
+    from bayes_amb.discrepancy.adequacy import Adequacy
+
+    verdict = Adequacy(False, "x", channels=["Ax"], bands_hz=[[600.0, 900.0]])
+    monkeypatch.setenv(pending.BACKEND_ENV, "thread")
+    monkeypatch.setattr(pending, "model_error", lambda *a, **k: "formed")
+    for band, adequate, error in ((500.0, True, None), (1000.0, False, "formed")):
+        fit = SimpleNamespace(model_error=None, like=None, x=None, p=1, cov=None,
+                              names=("k_By",))
+        monkeypatch.setattr(pending, "_assessed", lambda *a, fit=fit: (verdict, fit))
+        job = pending.PendingAdequacy(None, ("k_By",), None, 0)
+        job.set_band(band)
+        got, nominal = job.result()
+        assert got.adequate is adequate and nominal.model_error == error
+
+
 def test_the_sample_started_beside_the_adequacy_test_is_the_sample(rig, observer_1ms,
                                                                     monkeypatch):
     """identify samples while its adequacy test runs (inference/pending.py) and drops the

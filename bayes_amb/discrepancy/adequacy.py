@@ -122,6 +122,13 @@ def judge(checks: DataChecks, loc: Location, nrmse: float | None = None,
                     "find nothing the model leaves in the residual.")
 
 
+def only_above(verdict: Any, f_max_hz: float) -> bool:
+    """Whether a whole-band verdict that is not adequate found structure only above
+    f_max_hz, with no data check failed and no nonlinearity (inference.doubted.within_band)."""
+    return not (verdict.adequate or verdict.failed or verdict.nonlinear or not verdict.bands_hz
+                or min(lo for lo, _ in verdict.bands_hz) <= f_max_hz)
+
+
 def nominal_assessment(recording: Recording, names: tuple[str, ...],
                        priors: dict[str, Prior] | None = None, seed: int = 0,
                        learn: bool = False, forced: Nonlinearity | None = None
@@ -158,11 +165,14 @@ def assess(recording: Recording, names: tuple[str, ...],
 
 
 def assess_fit(recording: Recording, names: tuple[str, ...],
-               priors: dict[str, Prior] | None = None, seed: int = 0
-               ) -> tuple[Adequacy, FittedModel]:
+               priors: dict[str, Prior] | None = None, seed: int = 0,
+               band_hz: float | str | None = None) -> tuple[Adequacy, FittedModel]:
     """Adequacy and the nominal fit it judged; when the model is not adequate, the fit
     carries its model error (model_error.py), so that its draws (fitstats.draws) are the
-    posterior with the discrepancy integrated out."""
+    posterior with the discrepancy integrated out. ``band_hz``: the band the verdict will
+    be read for (identify's, inference.doubted.within_band; "validity": the nominal model's
+    validity band, identify's by default); where the structure lies only above it, the
+    model error is not formed (within_band drops it)."""
     checks, nominal, eps = nominal_assessment(recording, names, priors, seed, learn=True)
     if not np.isfinite(nominal.log_post):
         return Adequacy(False, "model NOT adequate: no parameter value in the prior gives a "
@@ -170,7 +180,9 @@ def assess_fit(recording: Recording, names: tuple[str, ...],
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
                  LocateOptions(seed=seed))
     verdict = judge(checks, loc, worst_nrmse(nominal, eps))
-    if not verdict.adequate:
+    if band_hz == "validity":
+        band_hz = nominal.forward.validity_band_hz()
+    if not verdict.adequate and not (band_hz is not None and only_above(verdict, band_hz)):
         nominal.model_error = model_error(nominal.like, nominal.x, nominal.p, nominal.cov,
                                           nominal.names, robust=True)
     return verdict, nominal

@@ -132,7 +132,8 @@ def locate_bands(k: NDArray, n: int, dt: float, n_bands: int, min_bins: int) -> 
     return bands
 
 
-def _coherence(R: NDArray, X: NDArray, bands: list[NDArray]) -> tuple[NDArray, NDArray]:
+def _coherence(R: NDArray, X: NDArray, bands: list[NDArray],
+               bases: list[NDArray] | None = None) -> tuple[NDArray, NDArray]:
     """Multiple coherence and F-test p-value of R (nf, 4) on X (nf, m) per band, channel;
     R may carry a leading batch dimension (nd, nf, 4), then so do the results. The
     regression residual is R minus its projection on the band's orthonormal basis of X
@@ -144,12 +145,13 @@ def _coherence(R: NDArray, X: NDArray, bands: list[NDArray]) -> tuple[NDArray, N
     residual whose noise peaks in the band (a mode of the noise response) then looked
     "coherent with the excitation": 31 of 50 effect-free one-channel foreign records were
     called unexplained that way (the F-test's degrees of freedom counted the dead columns
-    as well)."""
+    as well). ``bases``: the bands' bases, excitation_bases(X, bands), when they are at
+    hand."""
     R3 = R[None] if R.ndim == 2 else R
     coh = np.zeros((R3.shape[0], len(bands), R3.shape[2]))
     p = np.ones_like(coh)
-    for b, idx in enumerate(bands):
-        Q = excitation_basis(X[idx])
+    bases = excitation_bases(X, bands) if bases is None else bases
+    for b, (idx, Q) in enumerate(zip(bands, bases, strict=True)):
         m = Q.shape[1]
         if m == 0 or idx.size <= m + 1:
             continue
@@ -160,6 +162,11 @@ def _coherence(R: NDArray, X: NDArray, bands: list[NDArray]) -> tuple[NDArray, N
         F = ((ss0 - ss1) / m) / np.maximum(ss1 / (idx.size - m), 1e-300)
         p[:, b] = stats.f.sf(F, 2 * m, 2 * (idx.size - m))
     return (coh[0], p[0]) if R.ndim == 2 else (coh, p)
+
+
+def excitation_bases(X: NDArray, bands: list[NDArray]) -> list[NDArray]:
+    """The orthonormal basis of X over each band (excitation_basis)."""
+    return [excitation_basis(X[idx]) for idx in bands]
 
 
 def excitation_basis(Xb: NDArray, rtol: float = 1e-9) -> NDArray:
@@ -348,15 +355,14 @@ def _ppc(like: RobustWhittle, P_hat: NDArray, cov: NDArray | None, L: NDArray,
     ok = np.flatnonzero(stable[1:])
     nf = like.z.size
     L_inv = np.linalg.inv(L)
+    bases = excitation_bases(like.X, bands)
     t_coh, t_pow = [], []
     for c in range(0, ok.size, chunk):
         j = ok[c:c + chunk]
-        noise = np.empty((j.size, nf, 4), dtype=complex)
-        for i in range(j.size):                 # each draw's noise, in the order drawn
-            noise[i] = (rng.normal(size=(nf, 4))
-                        + 1j * rng.normal(size=(nf, 4))) / np.sqrt(2)
+        g = rng.normal(size=(j.size, 2, nf, 4))  # each draw's real, then imaginary part
+        noise = (g[:, 0] + 1j * g[:, 1]) / np.sqrt(2)
         R = (Y[0][None] - Y[j + 1]) + (L[None] @ noise[..., None])[..., 0]
-        _, pc = _coherence(R, like.X, bands)
+        _, pc = _coherence(R, like.X, bands, bases)
         t_coh += list(-np.log10(np.maximum(pc.min(axis=(1, 2)), 1e-300)))
         t_pow += list(np.sum(np.abs((L_inv[None] @ R[..., None])[..., 0]) ** 2,
                              axis=(1, 2)))

@@ -11,6 +11,7 @@ from typing import Any
 
 import numpy as np
 
+from bayes_amb.discrepancy.adequacy import only_above
 from bayes_amb.discrepancy.fitstats import draws, theta_summary
 from bayes_amb.discrepancy.fitting import FittedModel
 from bayes_amb.uncertainty import get_spec
@@ -120,8 +121,7 @@ def within_band(verdict: Any, nominal: FittedModel, f_max_hz: float) -> Any:
     it (flexible modes the reduced model leaves out by design) and no data check failed,
     the model is adequate for identify, and its own intervals stand (the model error of
     the whole-band fit would widen them for bands this likelihood does not use)."""
-    if (verdict.adequate or verdict.failed or verdict.nonlinear or not verdict.bands_hz
-            or min(lo for lo, _ in verdict.bands_hz) <= f_max_hz):
+    if not only_above(verdict, f_max_hz):
         return verdict
     nominal.model_error = None
     spans = ", ".join(f"{lo:.0f}-{hi:.0f} Hz" for lo, hi in verdict.bands_hz[:3])

@@ -33,6 +33,7 @@ from multiprocessing.connection import Connection
 from typing import Any
 
 from bayes_amb.discrepancy.adequacy import assess_fit
+from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.inference.doubted import within_band
 from bayes_amb.inference.priors import Prior
 from bayes_amb.io.recording import Recording
@@ -48,7 +49,7 @@ class Doubted(Exception):
 
 def _assessed(recording: Recording, names: tuple[str, ...],
               priors: dict[str, Prior] | None, seed: int) -> tuple[Any, Any]:
-    return assess_fit(recording, names, priors, seed=seed)
+    return assess_fit(recording, names, priors, seed=seed, band_hz="validity")
 
 
 def forks() -> bool:
@@ -130,7 +131,13 @@ class PendingAdequacy:
             if self._f_max_hz is None:
                 raise RuntimeError("PendingAdequacy: set_band was not called")
             verdict, nominal = raw
-            self._read = (within_band(verdict, nominal, self._f_max_hz), nominal)
+            verdict = within_band(verdict, nominal, self._f_max_hz)
+            if not verdict.adequate and nominal.model_error is None and not verdict.failed:
+                # the test read its verdict for the model's validity band and left the
+                # model error out; identify's band differs from it here: formed now
+                nominal.model_error = model_error(nominal.like, nominal.x, nominal.p,
+                                                  nominal.cov, nominal.names, robust=True)
+            self._read = (verdict, nominal)
         return self._read
 
     def _done(self, wait: bool) -> bool:
