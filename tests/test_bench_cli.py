@@ -150,8 +150,35 @@ def test_diagnose_benchmark_names_the_hidden_lag():
     assert math.isfinite(d["cpu_s"]) and d["cpu_s"] > 0 and d["target_median_s"] == 20
     assert d["full_screen_cpu_s"] > 0 and d["speedup"] == pytest.approx(
         d["full_screen_cpu_s"] / d["cpu_s"])
+    assert 0 < d["screens_cpu_s"] < d["cpu_s"] and d["screens_rise"] == pytest.approx(
+        d["screens_cpu_s"] / (d["cpu_s"] - d["screens_cpu_s"]))
     text = format_text(doc)
     assert "diagnose" in text and "actuator_lag" in text and "full screens" in text
+    assert "nonlinear screens" in text and "target <= 15 %" in text
+
+
+def test_cpu_in_counts_the_wrapped_calls_and_restores_them():
+    """The diagnose benchmark's timer (diagnose_case.cpu_in) sums the CPU time of calls of
+    the named functions only while its block runs, and puts the functions back."""
+    import bayes_amb.discrepancy.adequacy as adequacy
+    from bayes_amb.bench.diagnose_case import SCREENS, cpu_in
+
+    original = adequacy.take_in_clipping
+    with cpu_in(SCREENS[:1]) as spent:
+        assert adequacy.take_in_clipping is not original
+        assert spent[0] == 0.0
+    assert adequacy.take_in_clipping is original
+    import numpy as np
+
+    import bayes_amb.control.discrete as discrete
+    with cpu_in((("bayes_amb.control.discrete", "spectral_radius"),)) as spent:
+        discrete.spectral_radius(np.random.default_rng(0).standard_normal((300, 300)))
+        inside = spent[0]
+        np.linalg.eigvals(np.random.default_rng(1).standard_normal((300, 300)))
+    assert inside > 0 and spent[0] == inside       # the wrapped call, not the eigvals after
+    with pytest.raises(RuntimeError), cpu_in(SCREENS[:1]):
+        raise RuntimeError("a failed diagnosis")
+    assert adequacy.take_in_clipping is original
 
 
 def test_transient_benchmark_fits_the_start_by_default():

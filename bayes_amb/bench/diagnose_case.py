@@ -10,17 +10,62 @@ the screening before fingerprint pre-screening); the older paths (L-BFGS-B with 
 differences, a multi-start nominal fit, Nelder-Mead screening) are gone, and
 benchmarks/README.md gives them side by side on the same recordings. The checks: the
 hidden lag must be named, and both runs must name the same effects with the same verdict.
+
+The record is linear (a lag is linear physics), so the nonlinearity screens that run on
+every record (issue 45: clipping, the magnets' force law, a slew limit and a capped current
+loop, adequacy.nominal_assessment's take_in_clipping, and the capped loop looked for behind
+a named lag, diagnose's loop_alternative) find nothing here; the CPU time spent in them is
+measured in the default run and reported as the rise they cause over the rest of the
+diagnosis (target <= 15 %). Where a screen finds something, the same calls also refit the
+model with it, which is then no longer screening: the check that the lag is named and no
+nonlinearity is guards against that.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 from bayes_amb.bench.results import BenchmarkError, DiagnoseBench
 from bayes_amb.simulate import parse_effect
 
 TARGET_MEDIAN_S = 20.0
 """Issue 16: median CPU time over the foreign benchmark's recordings (slowest <= 60 s)."""
+TARGET_SCREENS_RISE = 0.15
+"""Issue 45: the nonlinearity screens raise diagnose's time on linear records by <= 15 %."""
+SCREENS = (("bayes_amb.discrepancy.adequacy", "take_in_clipping"),
+           ("bayes_amb.discrepancy.diagnose", "loop_alternative"))
+"""Where diagnose calls the nonlinearity screens (module, name as the module holds it)."""
+
+
+@contextmanager
+def cpu_in(targets: tuple[tuple[str, str], ...]) -> Iterator[list[float]]:
+    """CPU seconds (``time.process_time``) spent inside the named module functions while
+    the block runs, summed into the one-element list yielded (each is wrapped for the
+    block and restored after it, also on an error)."""
+    import importlib
+
+    spent = [0.0]
+    saved = []
+    for module, name in targets:
+        mod = importlib.import_module(module)
+        original = getattr(mod, name)
+
+        def timed(*args, _f=original, **kwargs):
+            c0 = time.process_time()
+            try:
+                return _f(*args, **kwargs)
+            finally:
+                spent[0] += time.process_time() - c0
+
+        saved.append((mod, name, original))
+        setattr(mod, name, timed)
+    try:
+        yield spent
+    finally:
+        for mod, name, original in saved:
+            setattr(mod, name, original)
 
 
 def bench_diagnose(quick: bool = False) -> DiagnoseBench:
@@ -42,7 +87,8 @@ def bench_diagnose(quick: bool = False) -> DiagnoseBench:
     full = diagnose(rec, options=DiagnoseOptions(prescreen=False))
     full_cpu = time.process_time() - c0
     c0, w0 = time.process_time(), time.perf_counter()
-    d = diagnose(rec)
+    with cpu_in(SCREENS) as screens:
+        d = diagnose(rec)
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     if "actuator_lag" not in d.effects:
         raise BenchmarkError(f"diagnose benchmark: the hidden actuator lag was not named "
@@ -51,7 +97,12 @@ def bench_diagnose(quick: bool = False) -> DiagnoseBench:
         raise BenchmarkError(f"diagnose benchmark: pre-screening changed the diagnosis "
                              f"({d.effects}, {d.verdict!r} against "
                              f"{full.effects}, {full.verdict!r} screened fully)")
+    if d.verdict == "nonlinear":
+        raise BenchmarkError("diagnose benchmark: a nonlinearity was found on a linear "
+                             "record, so the screens' time includes modelling it")
     return DiagnoseBench(cpu_s=cpu, wall_s=wall, target_median_s=TARGET_MEDIAN_S,
                          duration_s=duration, n_samples=int(rec.y.shape[0]),
                          effects=tuple(d.effects), verdict=d.verdict,
-                         full_screen_cpu_s=full_cpu, speedup=full_cpu / cpu)
+                         full_screen_cpu_s=full_cpu, speedup=full_cpu / cpu,
+                         screens_cpu_s=screens[0], screens_rise=screens[0] / (cpu - screens[0]),
+                         target_screens_rise=TARGET_SCREENS_RISE)

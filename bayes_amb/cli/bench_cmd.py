@@ -79,6 +79,11 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
         rows.append(("diagnose", f"{r['cpu_s']:.1f} s CPU ({r['wall_s']:.1f} s wall)",
                      f"{r['full_screen_cpu_s']:.1f} s CPU, full screens",
                      f"{r['speedup']:.1f}x"))
+        if r.get("screens_cpu_s") is not None:
+            rows.append(("nonlinear screens", f"{r['screens_cpu_s']:.2f} s CPU within it",
+                         f"{r['cpu_s'] - r['screens_cpu_s']:.1f} s CPU for the rest",
+                         f"+{100 * r['screens_rise']:.1f} % (target "
+                         f"<= {100 * r['target_screens_rise']:.0f} %)"))
     if "cli" in d:
         r = d["cli"]
         rows.append(("cli", f"{r['default_s']:.1f} s without the variable",
