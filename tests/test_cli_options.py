@@ -303,3 +303,13 @@ def test_rig_option_is_checked_against_the_recording(tmp_path, capsys):
     capsys.readouterr()
     assert main(["answers", str(tmp_path / "id"), "--rig", "small_rotor"]) == 2
     assert "option --rig" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("option", ["--r1-rms", "--amplitude", "--seed"])
+def test_an_option_joined_to_a_double_dash_is_refused(option, tmp_path, capsys):
+    """``--opt=--``: Python 3.12's argparse drops the value and leaves [] (3.13 calls it
+    invalid); either way one line names the option, with status 2."""
+    code = main(["simulate", f"{option}=--", "-o", str(tmp_path / "x.csv")])
+    _, err = capsys.readouterr()
+    assert code == 2 and len(err.splitlines()) == 1 and option in err, err
+    assert not (tmp_path / "x.csv").exists()

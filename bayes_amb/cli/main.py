@@ -80,6 +80,24 @@ def _threads_option(argv: list[str]) -> str | None:
     return None
 
 
+def _swallowed_value(parser: argparse.ArgumentParser, args: argparse.Namespace
+                     ) -> tuple[argparse.ArgumentParser, str] | None:
+    """An option given ``--opt=--``, whose value Python 3.12's argparse drops (it leaves
+    [] where one typed value belongs, and 3.13 reports the value as invalid): the parser
+    that owns it and the error to report, or None."""
+    parsers = [parser]
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            chosen = action.choices.get(getattr(args, "command", None))
+            parsers += [chosen] if chosen is not None else []
+    for p in parsers:
+        for action in p._actions:
+            if (action.option_strings and action.nargs is None and action.type is not None
+                    and isinstance(getattr(args, action.dest, None), list)):
+                return p, f"argument {'/'.join(action.option_strings)}: invalid value '--'"
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     try:                                      # before the heavy imports (BLAS reads its env)
         configure_process(_threads_option(sys.argv[1:] if argv is None else argv))
@@ -91,6 +109,11 @@ def main(argv: list[str] | None = None) -> int:
         args = parser.parse_args(argv)
     except SystemExit as exc:                 # a usage error (status 2), --help or --version
         return exc.code if isinstance(exc.code, int) else 2
+    if (swallowed := _swallowed_value(parser, args)) is not None:
+        try:
+            swallowed[0].error(swallowed[1])
+        except SystemExit as exc:
+            return exc.code if isinstance(exc.code, int) else 2
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
     if not getattr(args, "func", None):
