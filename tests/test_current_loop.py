@@ -36,6 +36,19 @@ def test_the_loop_is_the_lag_without_a_cap_and_the_slew_limit_with_an_ideal_loop
                                atol=1e-12)
 
 
+@pytest.mark.parametrize("first_moment", [True, False])
+def test_the_compiled_loop_is_its_numpy_form(command, first_moment):
+    """loop_defect's kernel against loop_defect_numpy, capped, uncapped, ideal and both,
+    side by side: the same to rounding (the exponential's last bit)."""
+    from bayes_amb.discrepancy.loop_waveform import loop_defect_numpy
+
+    rates, bws = [2000.0, 5000.0, np.inf, 9000.0], [1500.0, np.inf, 2000.0, 3000.0]
+    got = loop_defect(command, rates, bws, DT, first_moment)
+    want = loop_defect_numpy(command, rates, bws, DT, first_moment)
+    assert got.shape == want.shape == (4, *command.shape)
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-14 * np.abs(want).max())
+
+
 def test_the_held_lag_has_the_continuous_lags_response_in_the_band():
     """The held samples with the pulse's first moment in place give the plant the lag
     1 / (1 + j f / fb) to 2e-3 up to 500 Hz at 10 kHz (relative, amplitude and phase)."""

@@ -15,6 +15,7 @@ is the sample's middle).
 from __future__ import annotations
 
 import numpy as np
+from numba import njit
 from numpy.typing import NDArray
 from scipy.signal import lfilter
 
@@ -31,7 +32,56 @@ def loop_defect(u: NDArray, rates: NDArray, bandwidths_hz: NDArray, dt: float,
     """Delivered minus commanded current (G, N, 4) for G loops (rate S A/s, bandwidth Hz;
     np.inf allowed for either), driven by the held command u (N, 4), as held samples (the
     module docstring). The loop starts at the first command. first_moment=False holds
-    each pulse's mean in its own sample (the cruder form)."""
+    each pulse's mean in its own sample (the cruder form). Compiled (_loop_kernel; the
+    numpy form, loop_defect_numpy, took 0.9 s of a 2 s record's screen)."""
+    u = np.ascontiguousarray(u, dtype=float)
+    S = np.asarray(rates, dtype=float).ravel()
+    wb = 2.0 * np.pi * np.asarray(bandwidths_hz, dtype=float).ravel()
+    S = np.ascontiguousarray(np.where(np.isfinite(S), S, 1e150))   # no cap / ideal loop
+    wb = np.ascontiguousarray(np.where(np.isfinite(wb), wb, 1e150))
+    d = np.zeros((S.size, u.shape[0], u.shape[1]))
+    _loop_kernel(u, S, wb, float(dt), bool(first_moment), d)
+    return d
+
+
+@njit(cache=True, nogil=True)
+def _loop_kernel(u, S, wb, dt, first_moment, d):  # pragma: no cover - compiled
+    # loop_defect_numpy's arithmetic, one loop and channel at a time in sample order
+    n, nc = u.shape
+    for j in range(S.size):
+        s_j, w_j = S[j], wb[j]
+        e_free = s_j / w_j                       # |w - i| below which the lag is free
+        for c in range(nc):
+            i = u[0, c]
+            for k in range(n):
+                e0 = u[k, c] - i
+                sg = 1.0 if e0 > 0 else (-1.0 if e0 < 0 else 0.0)
+                a = abs(e0)
+                t1 = min(max((a - e_free) / s_j, 0.0), dt)    # the ramp's end
+                g1 = a - s_j * t1                             # the error it leaves
+                L = dt - t1
+                x = np.exp(-w_j * L)
+                g_end = g1 * x
+                q_exp = g1 * (1.0 - x) / w_j
+                Q = a * t1 - 0.5 * s_j * t1 * t1 + q_exp - g_end * dt
+                pulse = -sg * Q / dt
+                end = -sg * g_end
+                if first_moment:
+                    M1 = (0.5 * a * t1 * t1 - s_j * t1 ** 3 / 3.0 + t1 * q_exp
+                          + g1 * ((1.0 - x) / w_j ** 2 - L * x / w_j) - 0.5 * g_end * dt * dt)
+                    share = 0.5 - M1 / Q / dt if Q > 0 else 0.0
+                    d[j, k, c] += end + (1.0 - share) * pulse
+                    if k:
+                        d[j, k - 1, c] += share * pulse
+                else:
+                    d[j, k, c] += end + pulse
+                i = u[k, c] - sg * g_end
+
+
+def loop_defect_numpy(u: NDArray, rates: NDArray, bandwidths_hz: NDArray, dt: float,
+                      first_moment: bool = True) -> NDArray:
+    """:func:`loop_defect` in numpy, the G loops side by side in each sample's step (the
+    compiled kernel's reference, held to it by a test)."""
     u = np.asarray(u, dtype=float)
     n = u.shape[0]
     S = np.asarray(rates, dtype=float).reshape(-1, 1)
