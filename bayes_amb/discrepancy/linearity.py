@@ -152,13 +152,18 @@ def at_extremes(x: NDArray) -> tuple[NDArray, NDArray]:
     return x >= x.max() - tol, x <= x.min() + tol
 
 
-def _residualise(A: NDArray, Z: NDArray, bands: list[NDArray]) -> NDArray:
-    """A with its least-squares fit on Z removed within each band (A, Z: (nf, .))."""
+def _residualise(A: NDArray, bases: list[tuple[NDArray, NDArray]]) -> NDArray:
+    """A (nf, .) with its least-squares fit on Z removed within each band, given as (the
+    band's bins, an orthonormal basis Q of Z there: band_bases)."""
     out = A.copy()
-    for idx in bands:
-        Q, _ = np.linalg.qr(Z[idx])
+    for idx, Q in bases:
         out[idx] = A[idx] - Q @ (Q.conj().T @ A[idx])
     return out
+
+
+def band_bases(Z: NDArray, bands: list[NDArray]) -> list[tuple[NDArray, NDArray]]:
+    """Each band's bins and the orthonormal basis of Z (nf, .) over them (QR)."""
+    return [(idx, np.linalg.qr(Z[idx])[0]) for idx in bands]
 
 
 def clip_defect(u: NDArray, limit: float, centre: NDArray | None = None) -> NDArray:
@@ -202,9 +207,9 @@ class Regression:
         self.pooled = np.abs(self.u - np.median(self.u, axis=0)).ravel()
         w = lfilter(like.prefilter, [1.0], self.u - self.u.mean(axis=0), axis=0)
         self.U = np.hstack([np.fft.rfft(w[self.start:], axis=0)[like.k], like.X])
-        self.narrow = np.array_split(np.arange(like.k.size),
-                                     max(1, like.k.size // BAND_BINS))
-        self.y_linear_free = self.rows(_residualise(rows[0], self.U, self.narrow))
+        self.narrow = band_bases(self.U, np.array_split(np.arange(like.k.size),
+                                                        max(1, like.k.size // BAND_BINS)))
+        self.y_linear_free = self.rows(_residualise(rows[0], self.narrow))
 
     def rows(self, V: NDArray) -> NDArray:
         """Whitened bins, real and imaginary parts stacked as regression rows."""
@@ -227,7 +232,7 @@ class Regression:
     def linear_free(self, X: NDArray) -> NDArray:
         """Regression rows of bins X (nf, 4) freed of their fit on the DFTs of u and the
         excitation within narrow bands (the part not linear in the loop's own signals)."""
-        return self.rows(_residualise(X, self.U, self.narrow))
+        return self.rows(_residualise(X, self.narrow))
 
     def z_rows(self, limit: float, centre: NDArray | None = None) -> NDArray:
         """Regression rows of T_r2 d for the clip defect at this limit and centre."""
