@@ -261,3 +261,31 @@ def test_sampled_posteriors_are_saved_as_emcee_draws(ctrl, tmp_path):
         ds = xr.load_dataset(f)
         assert ds.attrs["inference"] == "emcee" and ds.sizes["draw"] > 100
         assert np.all(np.isfinite(ds["k_By"].values))
+
+
+def test_the_running_speeds_line_has_a_band_of_its_own_width(control):
+    """The diagnosis' likelihood widens the band of the 1x bin to LINE_BAND_BINS where the
+    record's bands are narrower there (a line alone in a band of one or two bins is taken
+    for that band's noise); elsewhere the bands stay, and identify's likelihood keeps
+    its own."""
+    from dataclasses import replace as _replace
+
+    from bayes_amb.discrepancy.fitting import build
+    from bayes_amb.discrepancy.likelihood import LINE_BAND_BINS
+    from bayes_amb.inference.forward import ForwardModel
+    from bayes_amb.inference.offline import dual_youla_eps
+    from bayes_amb.inference.whittle import WhittleLikelihood, band_edges
+
+    rec = _replace(control[0], speed_rpm=3000.0)             # 1x at 50 Hz: bands of 1 bin
+    eps = dual_youla_eps(ForwardModel(rec, BEARING_COEFFICIENTS).parts, rec.y, rec.u)
+    fwd, like, _ = build(rec, BEARING_COEFFICIENTS, eps)
+    plain = band_edges(like.k.size, 192)
+    c = int(np.argmin(np.abs(like.k / (like.n * fwd.dt) - 50.0)))
+    band = int(np.searchsorted(like.starts, c, side="right") - 1)
+    assert like.counts[band] >= LINE_BAND_BINS and like.starts[band] <= c - 8
+    assert like.counts.sum() == like.k.size and np.all(like.counts > 0)
+    below = plain < like.starts[band]
+    assert np.array_equal(like.starts[like.starts < like.starts[band]], plain[below])
+    assert np.array_equal(like.starts[band + 1:], plain[plain > c + 8])
+    own = WhittleLikelihood(ForwardModel(rec, BEARING_COEFFICIENTS), eps)
+    assert np.array_equal(own.starts, band_edges(own.k.size, 256))

@@ -137,7 +137,7 @@ class WhittleLikelihood(RowMemory):
         self.z = np.exp(2j * np.pi * k / n)
         self.eps = np.asarray(eps, dtype=float)
         self.scale = float(np.sqrt(np.mean(eps**2))) or 1.0
-        self.starts = band_edges(k.size, n_bands)
+        self.starts = self._band_starts(k, n, n_bands)
         self.counts = np.diff(np.append(self.starts, k.size))
         self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (n * forward.dt)
         self.prefilter = np.ones(1)
@@ -149,6 +149,11 @@ class WhittleLikelihood(RowMemory):
             self.prefilter = data_prewhitening(self.eps, forward.dt)
         self._apply_prefilter()
         self.set_noise_reference(np.zeros(len(forward.params)))
+
+    def _band_starts(self, k: NDArray, n: int, n_bands: int) -> NDArray:
+        """Index of each band's first bin (band_edges; the diagnosis' likelihood widens
+        the band of the running speed's line, discrepancy.likelihood.RobustWhittle)."""
+        return band_edges(k.size, n_bands)
 
     def _apply_prefilter(self) -> None:
         """Filter eps and x with the scalar FIR self.prefilter (from rest); DFT both."""
