@@ -211,7 +211,9 @@ def test_a_line_is_refined_from_the_start_with_the_larger_bayes_factor(nominal, 
     """refine_line scores only the better of the two MAPs ('rest', 'steady') when they are
     further apart than START_OCCAM_TOL; it keeps the start with the larger Bayes factor,
     the one scoring both would keep, and its Occam factors differ by far less than the
-    tolerance."""
+    tolerance (0.0080 on this record, whose 1x line has a band of 16 bins in the
+    diagnosis' likelihood, where the unbalance's log BF is 166; 0.0013 and 129 with a
+    narrower band)."""
     from dataclasses import replace
 
     import bayes_amb.discrepancy.select as sel
@@ -220,7 +222,7 @@ def test_a_line_is_refined_from_the_start_with_the_larger_bayes_factor(nominal, 
             sel.refine(nominal, sel.Screen(replace(sc.candidate, start="steady"), sc.gain,
                                            sc.phi))]
     occam = [f.log_bf - (f.log_post - nominal.log_post) for f in both]
-    assert abs(occam[0] - occam[1]) < sel.START_OCCAM_TOL / 10
+    assert abs(occam[0] - occam[1]) < sel.START_OCCAM_TOL / 5
     calls = []
     real = sel.free_covariance
     monkeypatch.setattr(sel, "free_covariance",
