@@ -256,9 +256,9 @@ class DiagnoseBench(Result):
     verdict: str
     full_screen_cpu_s: float
     speedup: float
-    screens_cpu_s: float = float("nan")
-    screens_rise: float = float("nan")
-    target_screens_rise: float = 0.15
+    screens_cpu_s: float
+    screens_rise: float
+    target_screens_rise: float
 
 
 def environment() -> dict[str, Any]:

@@ -79,7 +79,14 @@ test rig (1 s at 10 kHz, 3000 rpm, its 1x at 50 Hz in a band of 2 bins) an unbal
 line stood 3-10 times the noise rms gained 6 nats, and was not named in 3 of 6 foreign
 records; with the line's band 18 bins wide it was named in those 3 (2 confident)."""
 SPEED_TOLERANCE = 0.01
-"""As locate.SPEED_TOLERANCE (the written speed's relative error the 1x search allows)."""
+"""Relative tolerance of the running speed written in a recording (lines within it of 1x
+count as synchronous; locate.py's 1x tests and speed search use it too)."""
+
+
+def alias_hz(f: float, fs: float) -> float:
+    """Frequency at which a tone at f appears after sampling at fs."""
+    r = f % fs
+    return min(r, fs - r)
 
 
 def line_band_starts(starts: NDArray, k: NDArray, n: int, dt: float, f_rot_hz: float
@@ -97,9 +104,8 @@ def line_band_starts(starts: NDArray, k: NDArray, n: int, dt: float, f_rot_hz: f
     >>> line_band_starts(np.array([0, 10, 60]), k, 1000, 1e-3, 40.0).tolist()
     [0, 10, 60]
     """
-    df, fs = 1.0 / (n * dt), 1.0 / dt
-    r = f_rot_hz % fs
-    f1 = min(r, fs - r)                          # where a 1x line shows after sampling
+    df = 1.0 / (n * dt)
+    f1 = alias_hz(f_rot_hz, 1.0 / dt)            # where a 1x line shows after sampling
     c = int(np.argmin(np.abs(k * df - f1)))
     if abs(k[c] * df - f1) > 1.5 * df:           # 1x outside the likelihood's bins
         return starts

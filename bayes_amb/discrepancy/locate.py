@@ -48,7 +48,7 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from scipy.optimize import minimize_scalar
 
 from bayes_amb.control.discrete import ss_freqresp_modal
-from bayes_amb.discrepancy.likelihood import RobustWhittle
+from bayes_amb.discrepancy.likelihood import SPEED_TOLERANCE, RobustWhittle, alias_hz
 from bayes_amb.rig import CHANNELS
 
 ALPHA = 0.01
@@ -247,11 +247,6 @@ def _xcorr(e: NDArray, x: NDArray, lags: int) -> tuple[NDArray, NDArray]:
     return out, stats.chi2.sf(q, lags + 1)
 
 
-SPEED_TOLERANCE = 0.01
-"""Relative tolerance of the running speed written in a recording (lines within it of 1x
-count as synchronous)."""
-
-
 def _lines(W: NDArray, like: RobustWhittle, f_rot: float
            ) -> tuple[list[dict[str, Any]], float, NDArray]:
     """Bins of the whitened residual W whose power stands out of a running median of 51
@@ -270,7 +265,7 @@ def _lines(W: NDArray, like: RobustWhittle, f_rot: float
     p_bin = np.minimum(1.0, np.exp(-ratio) * n_tests)
     df = 1.0 / (like.n * like.forward.dt)
     freq = like.k * df
-    alias = _alias(f_rot, 1.0 / like.forward.dt)
+    alias = alias_hz(f_rot, 1.0 / like.forward.dt)
     sync_bin = np.abs(freq - alias) <= max(2.0 * df, SPEED_TOLERANCE * f_rot)
     found: list[dict[str, Any]] = []
     nuisance = np.zeros(freq.size, dtype=bool)
@@ -303,7 +298,7 @@ def synchronous_speed(residual: NDArray, dt: float, speed_rpm: float,
     f0 = speed_rpm / 60.0
     F = np.fft.rfft(r, pad * n, axis=0)
     f = np.fft.rfftfreq(pad * n, dt)
-    band = np.flatnonzero(np.abs(f - _alias(f0, 1.0 / dt)) <= tolerance * f0)
+    band = np.flatnonzero(np.abs(f - alias_hz(f0, 1.0 / dt)) <= tolerance * f0)
     if band.size == 0:
         return speed_rpm
     i = band[np.argmax(np.sum(np.abs(F[band]) ** 2, axis=1))]
@@ -314,15 +309,9 @@ def synchronous_speed(residual: NDArray, dt: float, speed_rpm: float,
 
     res = minimize_scalar(neg_power, bounds=(f[i] - df, f[i] + df), method="bounded",
                           options={"xatol": 1e-4 * df})
-    alias = _alias(f0, 1.0 / dt)               # unfold an aliased line
+    alias = alias_hz(f0, 1.0 / dt)               # unfold an aliased line
     sign = 1.0 if (f0 % (1.0 / dt)) <= 0.5 / dt else -1.0
     return 60.0 * (f0 + sign * (float(res.x) - alias))
-
-
-def _alias(f: float, fs: float) -> float:
-    """Frequency at which a tone at f appears after sampling at fs."""
-    r = f % fs
-    return min(r, fs - r)
 
 
 def _windows(e: NDArray, n_windows: int, dt: float, skip: int = 0
