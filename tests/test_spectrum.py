@@ -99,10 +99,12 @@ def test_a_low_pass_force_is_learned_where_it_is(low_pass_identification):
         assert g[f < 40].mean() - g[f > 200].mean() > 10, ch
 
 
-def test_a_mains_line_is_noise_reported_with_its_frequency(low_pass_identification):
+def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_identification):
     """A 150 Hz line added to the Ax probe of the low-pass force record (100 nm, five times
     the sensor noise's rms, above the force's band, on the measurement after the fact):
-    the learned spectrum reports it as a line at 150 Hz on Ax, and no other line."""
+    its bin is left out of the likelihood before the fit and reported as a line at 150 Hz
+    on Ax, not synchronous, and no other line; the record without it has none. With
+    leave_out_lines=False the learned spectrum takes it as noise instead, as before."""
     from dataclasses import replace
 
     rig = load_rig()
@@ -114,8 +116,16 @@ def test_a_mains_line_is_noise_reported_with_its_frequency(low_pass_identificati
     y[:, 0] += 1e-7 * np.cos(2 * np.pi * 150.0 * t + 0.3)
     res = identify(replace(rec, y=y), BEARING_COEFFICIENTS,
                    options=IdentifyOptions(map_only=True, adequacy=False))
-    lines = res.noise.spectrum.lines
-    assert lines is not None and len(lines) == 1, lines
-    assert lines[0]["f_hz"] == pytest.approx(150.0, abs=1.0) and "Ax" in lines[0]["channels"]
-    assert "lines taken as noise: 150 Hz" in res.noise.spectrum.line
-    assert low_pass_identification.noise.spectrum.lines is None
+    out = res.noise.lines_left_out
+    assert out is not None and len(out) == 1, out
+    assert out[0].f_hz == pytest.approx(150.0, abs=1.0) and "Ax" in out[0].channels
+    assert not out[0].synchronous and out[0].bins <= 3
+    assert "left out of the likelihood" in res.summary() and "150 Hz" in res.summary()
+    assert res.noise.spectrum is None or not res.noise.spectrum.lines
+    assert low_pass_identification.noise.lines_left_out is None
+    kept = identify(replace(rec, y=y), BEARING_COEFFICIENTS,
+                    options=IdentifyOptions(map_only=True, adequacy=False,
+                                            leave_out_lines=False))
+    assert kept.noise.lines_left_out is None
+    assert kept.noise.spectrum.lines is not None and len(kept.noise.spectrum.lines) == 1
+    assert "lines taken as noise: 150 Hz" in kept.noise.spectrum.line

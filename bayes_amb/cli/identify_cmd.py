@@ -58,6 +58,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    "where the record's noise is not white) instead of learning the noise "
                    "spectrum from the record (default: learned where the residual is not "
                    "white)")
+    p.add_argument("--keep-lines", action="store_true",
+                   help="keep the record's narrowband lines (mains pick-up, a pump, the "
+                   "unbalance) in the likelihood (default: their bins are left out before "
+                   "the fit and listed under noise.lines_left_out)")
     p.add_argument("--map-method", choices=("lbfgs", "nelder-mead"), default="lbfgs",
                    help="MAP optimiser, one of lbfgs (L-BFGS-B, multi-start), nelder-mead "
                    "(the paper's fminsearch) (default lbfgs)")
@@ -159,7 +163,8 @@ def _run_joint(args: argparse.Namespace, priors) -> int:
         result = identify_joint(recs, args.params, priors, IdentifyOptions(
             walkers=args.walkers, steps=args.steps, map_only=args.map_only,
             map_method=args.map_method, seed=args.seed, progress=update,
-            initial_state=args.initial_state, learn_spectrum=not args.white_noise),
+            initial_state=args.initial_state, learn_spectrum=not args.white_noise,
+            leave_out_lines=not args.keep_lines),
             per_record=per)
     finally:
         if bar is not None:
@@ -187,7 +192,8 @@ def run(args: argparse.Namespace) -> int:
         result = identify(rec, args.params, priors, IdentifyOptions(
             walkers=args.walkers, steps=args.steps, map_only=args.map_only,
             map_method=args.map_method, seed=args.seed, progress=update,
-            initial_state=args.initial_state, learn_spectrum=not args.white_noise))
+            initial_state=args.initial_state, learn_spectrum=not args.white_noise,
+            leave_out_lines=not args.keep_lines))
     finally:
         if bar is not None:
             bar.close()

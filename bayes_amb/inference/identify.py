@@ -91,7 +91,10 @@ initial_state (fit the transient of the record's start, WhittleLikelihood.set_in
 True or False; None, the default, fits it when the data check finds that the record starts
 mid-operation, as a rig's records do: start_transient), learn_spectrum (learn the noise
 spectrum from the record, inference/spectrum.py, the default; False: the three white
-sources, with the noise check's sandwich where the record's noise is not white)."""
+sources, with the noise check's sandwich where the record's noise is not white),
+leave_out_lines (leave the record's narrowband lines, mains pick-up, a pump, the unbalance,
+out of the likelihood, inference/narrow_lines.py, the default; False: every bin of the
+band enters)."""
 
     walkers: int | None = None
     steps: int | None = None
@@ -105,6 +108,7 @@ sources, with the noise check's sandwich where the record's noise is not white).
     adequacy: bool = True
     initial_state: bool | None = None
     learn_spectrum: bool = True
+    leave_out_lines: bool = True
 
 
 def _absolute(source: str) -> str:
@@ -240,10 +244,12 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
             ) -> Identification:
     """identify after its likelihood is built and its adequacy test started: the MAP, the
     noise spectrum, the Laplace approximation or the sample, and the summary."""
+    post = LogPosterior(like, prior_set)
+    if opt.leave_out_lines:       # before any fit: a line's bins outweigh thousands of others
+        like.leave_out_lines(_theta_start(post))
     start = start_transient(recording, forward, opt.initial_state)
     if start["fitted"]:
         like.set_initial_state(True)
-    post = LogPosterior(like, prior_set)
     m = find_map(post, opt.map_method)
     if not np.isfinite(m.log_post):
         raise BayesAmbError(f"recording {recording.source}: no parameter value in the prior "
@@ -297,7 +303,10 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
                   "map": {s: {"value": float(10 ** v), "unit": u}
                           for s, v, u in zip(NOISE_SOURCES, m.log10_sigma, NOISE_UNITS,
                                              strict=True)},
-                  **({"spectrum": spectrum.to_dict()} if spectrum is not None else {})},
+                  **({"spectrum": spectrum.to_dict()} if spectrum is not None else {}),
+                  **({"lines_left_out": like.lines_left_out.to_list()}
+                     if like.lines_left_out is not None and like.lines_left_out.lines
+                     else {})},
         "fast_path": forward.fast,
         "excitation_port": forward.port,
         "n_bands": like.n_bands,

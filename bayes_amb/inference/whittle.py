@@ -51,6 +51,7 @@ from bayes_amb.inference import band_algebra, kernels, walker_kernels
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
 from bayes_amb.inference.fused import FusedLikelihood
 from bayes_amb.inference.prewhitening import data_prewhitening, minimum_phase_inverse
+from bayes_amb.inference.narrow_lines import NarrowLines, find_narrow_lines
 from bayes_amb.inference.row_memory import RowMemory
 from bayes_amb.inference.spectrum import LearnedSpectrum, fold_colour
 
@@ -133,13 +134,11 @@ class WhittleLikelihood(RowMemory):
         if f_max_hz is not None:
             k = k[k / (n * forward.dt) <= f_max_hz]
         self.f_max_hz = float(k[-1] / (n * forward.dt))
-        self.k = k
-        self.z = np.exp(2j * np.pi * k / n)
         self.eps = np.asarray(eps, dtype=float)
         self.scale = float(np.sqrt(np.mean(eps**2))) or 1.0
-        self.starts = self._band_starts(k, n, n_bands)
-        self.counts = np.diff(np.append(self.starts, k.size))
-        self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (n * forward.dt)
+        self._n_bands = n_bands
+        self._set_bins(k)
+        self.lines_left_out: NarrowLines | None = None   # leave_out_lines: the lines found
         self.prefilter = np.ones(1)
         self.spectrum: LearnedSpectrum | None = None   # set_spectrum: a learned noise colour
         self._colour_ratio: NDArray | None = None      # its folded colour's power per band
@@ -149,6 +148,38 @@ class WhittleLikelihood(RowMemory):
             self.prefilter = data_prewhitening(self.eps, forward.dt)
         self._apply_prefilter()
         self.set_noise_reference(np.zeros(len(forward.params)))
+
+    def _set_bins(self, k: NDArray) -> None:
+        """The likelihood's bins k (DFT indices) and their bands."""
+        self.k = k
+        self.z = np.exp(2j * np.pi * k / self.n)
+        self.starts = self._band_starts(k, self.n, self._n_bands)
+        self.counts = np.diff(np.append(self.starts, k.size))
+        self.band_freq_hz = (k[self.starts] + 0.5 * (self.counts - 1)) / (self.n
+                                                                         * self.forward.dt)
+
+    def leave_out_lines(self, theta0: NDArray) -> NarrowLines:
+        """Find the record's narrowband lines on the residual at theta0 (the nominal
+        model) and leave their bins out of the likelihood (narrow_lines.py); call before
+        any fit. The lines found (none with the naive 'iid' model, or where the controller
+        does not stabilise theta0)."""
+        none = NarrowLines(np.zeros(self.k.size, dtype=bool))
+        if self.noise_model != "loop":
+            return none
+        R, stable = self.residual_dft(np.atleast_2d(np.asarray(theta0, dtype=float)))
+        if not stable[0]:
+            return none
+        speed = getattr(getattr(self.forward, "recording", None), "speed_rpm", None)
+        found = find_narrow_lines(R[0], self.X, self.k / (self.n * self.forward.dt), speed)
+        self.lines_left_out = found
+        if found.drop.any():
+            self._set_bins(self.k[~found.drop])
+            self._apply_prefilter()
+            self._fused = None
+            if getattr(self, "_row_sums", None) is not None:
+                self.remember_rows(self._row_capacity)
+            self.set_noise_reference(self.theta_ref)
+        return found
 
     def _band_starts(self, k: NDArray, n: int, n_bands: int) -> NDArray:
         """Index of each band's first bin (band_edges; the diagnosis' likelihood widens

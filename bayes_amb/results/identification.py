@@ -144,15 +144,47 @@ class NoiseSpectrum(Block):
 
 
 @block
+class NarrowLine(Block):
+    """A narrowband line left out of the likelihood (inference/narrow_lines.py): its
+    frequency (Hz, the strongest bin's), the bins left out, its level over the local noise
+    (dB), the channels that carry it, and whether it lies at a multiple of the running
+    speed (unbalance, runout: physics for a diagnosis, a disturbance to identify)."""
+
+    f_hz: float
+    bins: int
+    level_db: float
+    channels: list[str]
+    synchronous: bool
+
+    @property
+    def text(self) -> str:
+        return (f"{self.f_hz:.4g} Hz (+{self.level_db:.0f} dB, {','.join(self.channels)}"
+                f"{', synchronous' if self.synchronous else ''})")
+
+
+@block
 class Noise(Block):
-    """The noise model and its intensities (MAP; posterior after sampling), and the check
-    of its whiteness on the record."""
+    """The noise model and its intensities (MAP; posterior after sampling), the check of
+    its whiteness on the record, the spectrum learned from it, and the narrowband lines left
+    out of the likelihood."""
 
     model: str
     map: dict[str, NoiseValue]
     posterior: dict[str, NoisePosterior] | None = omitted()
     check: NoiseCheck | None = omitted()
     spectrum: NoiseSpectrum | None = omitted()
+    lines_left_out: list[NarrowLine] | None = omitted()
+
+    @property
+    def lines_line(self) -> str:
+        """One line for the summary: the lines left out, or empty."""
+        if not self.lines_left_out:
+            return ""
+        shown = ", ".join(ln.text for ln in self.lines_left_out[:6])
+        more = (f" and {len(self.lines_left_out) - 6} more"
+                if len(self.lines_left_out) > 6 else "")
+        bins = sum(ln.bins for ln in self.lines_left_out)
+        return f"narrowband lines left out of the likelihood ({bins} bins): {shown}{more}"
 
 
 @block
@@ -280,6 +312,8 @@ class Identification(Block):
             lines.append(self.adequacy.line)
         if self.start_transient is not None and self.start_transient.fitted:
             lines.append(f"start transient fitted ({self.start_transient.reason})")
+        if self.noise is not None and self.noise.lines_line:
+            lines.append(self.noise.lines_line)
         w = max(len(n) for n in self.parameters)
         for n, p in self.parameters.items():
             lines.append(f"{n:<{w}}  {p.mean:+.4f} +- {p.sd:.4f}  "
@@ -300,6 +334,7 @@ class Identification(Block):
                  self.adequacy.line if self.adequacy else "",
                  f"start transient fitted ({self.start_transient.reason})"
                  if self.start_transient is not None and self.start_transient.fitted else "",
+                 self.noise.lines_line if self.noise is not None else "",
                  self.inference_note or ""]
         title = (f"Identification of {self.recording}" if self.recording else
                  f"Identification of {len(self.recordings or [])} records")
