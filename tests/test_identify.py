@@ -630,3 +630,26 @@ def test_the_adequacy_process_ends_with_a_killed_parent(tmp_path):
     finally:
         if parent.poll() is None:
             parent.kill()
+
+
+def test_the_gradient_on_a_prior_bound_points_inside():
+    """On a prior bound the central difference has one point outside the prior (-inf):
+    the gradient is the one-sided difference towards the inside, not zero (a zero told
+    L-BFGS-B that a coefficient on its bound was optimal: on foreign band-limited-force
+    records k_By stayed on -0.8 where 0.6 inside it the log posterior was 7.8 higher)."""
+    from bayes_amb.inference.estimate import _grad
+
+    class Post:                      # -(x - 0.5)^2 - (y + 0.2)^2 on x >= 0, y <= 0
+        def __call__(self, rows):
+            x, y = rows[:, 0], rows[:, 1]
+            f = -(x - 0.5) ** 2 - (y + 0.2) ** 2
+            return np.where((x >= 0) & (y <= 0), f, -np.inf)
+
+    h = np.array([1e-5, 1e-5])
+    f, g = _grad(Post(), np.array([0.0, 0.0]), h)
+    assert f == pytest.approx(-0.29)
+    assert g[0] == pytest.approx(1.0, abs=1e-4) and g[1] == pytest.approx(-0.4, abs=1e-4)
+    _, g = _grad(Post(), np.array([0.3, -0.1]), h)          # inside: central differences
+    assert g == pytest.approx([0.4, -0.2], abs=1e-8)
+    _, g = _grad(Post(), np.array([-1.0, 0.5]), h)          # outside: no gradient
+    assert np.all(g == 0.0)

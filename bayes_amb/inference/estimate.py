@@ -98,14 +98,23 @@ class MapResult:
 def _grad(post: LogPosterior, x: NDArray, h: NDArray, idx: NDArray | None = None
           ) -> tuple[float, NDArray]:
     """Log posterior at x and its central-difference gradient along the coordinates idx
-    (all by default), with steps h (one per coordinate of x)."""
+    (all by default), with steps h (one per coordinate of x). Where one of the two points
+    lies outside the prior (x on its bound) the difference is one-sided, towards the
+    inside: a zero there told L-BFGS-B that a coefficient on its bound was optimal, and on
+    foreign band-limited-force records k_By stayed on -0.8 where 0.6 inside it the log
+    posterior was 7.8 higher (14 of 30 replicates had a coefficient on a bound)."""
     idx = np.arange(x.size) if idx is None else idx
     steps = np.zeros((idx.size, x.size))
     steps[np.arange(idx.size), idx] = h[idx]
     v = post(np.vstack([x, x + steps, x - steps]))
     f = v[0]
-    with np.errstate(invalid="ignore"):              # -inf - -inf at a prior bound
-        g = (v[1:idx.size + 1] - v[idx.size + 1:]) / (2 * h[idx])
+    up, down = v[1:idx.size + 1], v[idx.size + 1:]
+    with np.errstate(invalid="ignore"):              # -inf - -inf outside the prior
+        g = (up - down) / (2 * h[idx])
+        inward_up = np.isfinite(up) & ~np.isfinite(down)
+        inward_down = np.isfinite(down) & ~np.isfinite(up)
+        g[inward_up] = (up[inward_up] - f) / h[idx][inward_up]
+        g[inward_down] = (f - down[inward_down]) / h[idx][inward_down]
     g[~np.isfinite(g)] = 0.0
     return f, g
 
