@@ -130,8 +130,9 @@ def test_search_reaches_the_lbfgs_optimum(clean):
 
 def test_search_leaves_a_bound_the_nominal_fit_absorbed_the_lag_on(case):
     """The nominal fit takes the lag as negative damping (c_Bx, c_By on the -0.8 bound).
-    From there L-BFGS-B (projected, central differences) stays on the bound; the
-    Gauss-Newton step of the linear model leaves it and gains many nats."""
+    The Gauss-Newton step of the linear model leaves it, as high as from a neutral start;
+    so does L-BFGS-B now that its gradient on a bound is one-sided towards the inside
+    (estimate._grad; with a zero there it stayed on the bound, many nats lower)."""
     rec, eps = case
     nominal = fit_nominal(rec, NAMES, eps)
     assert nominal.value("c_By") == pytest.approx(-0.8)
@@ -141,8 +142,8 @@ def test_search_leaves_a_bound_the_nominal_fit_absorbed_the_lag_on(case):
     x_lb, _ = local_search(post, "lbfgs", x0)
     x_gn, f_gn = gn.gauss_newton(post, x0)
     _, f_ref = gn.gauss_newton(post, np.r_[np.zeros(4), x0[4:]])
-    assert f_gn > post(x_lb[None])[0] + 10 and x_lb[3] == pytest.approx(-0.8)
     assert f_gn >= f_ref - 1e-5 and x_gn[3] > -0.5     # as high as from a neutral start
+    assert x_lb[3] > -0.5 and post(x_lb[None])[0] > f_gn - 0.1
 
 
 def test_least_squares_start_equals_the_identification_estimate(case):
