@@ -258,7 +258,7 @@ class Regression:
         coefficients and row weights."""
         wt = np.ones_like(y)
         for _ in range(2):
-            b = np.linalg.lstsq(X * wt[:, None], y * wt, rcond=None)[0]
+            b = _weighted_lstsq(X, y, wt)
             s2 = np.bincount(self.group, (y - X @ b) ** 2, minlength=self.n_groups) / \
                 np.maximum(np.bincount(self.group, minlength=self.n_groups), 1)
             wt = 1.0 / np.sqrt(np.maximum(s2[self.group], 1e-300))
@@ -295,6 +295,25 @@ class Regression:
                                              [x0, x0 + 0.05 * np.eye(x0.size)])})
         x = res.x * lo
         return float(np.clip(x[0], lo, hi)), x[1:]
+
+
+def _weighted_lstsq(X: NDArray, y: NDArray, wt: NDArray) -> NDArray:
+    """Least squares of y wt on X wt; one column in closed form (an SVD of one column cost
+    2 ms a call, and the clipping screen makes about a hundred).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> X, y, w = rng.normal(size=(50, 1)), rng.normal(size=50), rng.uniform(1, 2, 50)
+    >>> ref = np.linalg.lstsq(X * w[:, None], y * w, rcond=None)[0]
+    >>> bool(np.allclose(_weighted_lstsq(X, y, w), ref, rtol=1e-12, atol=0))
+    True
+    """
+    if X.shape[1] != 1:
+        return np.linalg.lstsq(X * wt[:, None], y * wt, rcond=None)[0]
+    xw = X[:, 0] * wt
+    den = float(xw @ xw)
+    return np.array([float(xw @ (y * wt)) / den if den > 0 else 0.0])
 
 
 def _argmin_1d(f, grid: NDArray) -> float:
