@@ -120,6 +120,9 @@ def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_ident
     assert out is not None and len(out) == 1, out
     assert out[0].f_hz == pytest.approx(150.0, abs=1.0) and "Ax" in out[0].channels
     assert not out[0].synchronous and out[0].bins <= 3
+    like = res.likelihood
+    f = like.k / (like.n * like.forward.dt)
+    assert np.min(np.abs(f - 150.0)) > 0.5 and like.counts.sum() == like.k.size
     assert "left out of the likelihood" in res.summary() and "150 Hz" in res.summary()
     assert res.noise.spectrum is None or not res.noise.spectrum.lines
     assert low_pass_identification.noise.lines_left_out is None
