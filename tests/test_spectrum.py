@@ -124,6 +124,8 @@ def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_ident
     f = like.k / (like.n * like.forward.dt)
     assert np.min(np.abs(f - 150.0)) > 0.5 and like.counts.sum() == like.k.size
     assert "left out of the likelihood" in res.summary() and "150 Hz" in res.summary()
+    from bayes_amb.cli.identify_cmd import format_summary
+    assert "lines left out of the likelihood (1 bins): 150 Hz" in format_summary(res)
     assert res.noise.spectrum is None or not res.noise.spectrum.lines
     assert low_pass_identification.noise.lines_left_out is None
     kept = identify(replace(rec, y=y), BEARING_COEFFICIENTS,

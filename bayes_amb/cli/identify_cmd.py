@@ -112,6 +112,8 @@ def format_summary(s: Identification) -> str:
                                                   for k, v in s.noise.map.items()))
     for note in (s.identifiability or {}).get("notes", []):
         lines.append(f"warning: {note}")
+    if s.noise is not None and s.noise.lines_line:
+        lines.append(s.noise.lines_line)
     if s.noise is not None and s.noise.spectrum is not None:
         lines.append(s.noise.spectrum.line)
     check = s.noise.check if s.noise is not None else None

@@ -284,6 +284,9 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
     check = s.noise.check if s.noise is not None else None
     if check is not None and check.doubted:
         bullets.append(f"Noise: {check.line}")
+    if s.noise is not None and s.noise.lines_line:
+        bullets.append(f"Noise: {s.noise.lines_line} (disturbances the model has no part "
+                       "for; the coefficients are read from the other bins).")
     named = [e.description for e in dg.explanations] if dg is not None else []
     after = dg.parameters_after if dg is not None else {}
     if named and after:
