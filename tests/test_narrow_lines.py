@@ -33,7 +33,7 @@ def test_noise_alone_has_no_line_at_the_test_level():
 def test_a_line_is_found_on_its_channel_and_left_out():
     """A line 30 times the noise power (15 dB) at 60 Hz on the Ay channel only."""
     R, X, f = _case(1)
-    k = int(round(60.0 / DF)) - 1
+    k = round(60.0 / DF) - 1
     R[k, 1] += np.sqrt(30.0)
     out = find_narrow_lines(R, X, f)
     assert np.flatnonzero(out.drop).tolist() == [k]

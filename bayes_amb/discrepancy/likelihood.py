@@ -53,6 +53,7 @@ from scipy.special import gammaln
 from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.inference import kernels
 from bayes_amb.inference.forward import ModalBatch, dft_response, state_after
+from bayes_amb.inference.narrow_lines import SPEED_TOLERANCE
 from bayes_amb.inference.whittle import WhittleLikelihood
 
 P_CH = 4
@@ -78,9 +79,6 @@ or two bins (the low bands of a short record) is taken for that band's noise: on
 test rig (1 s at 10 kHz, 3000 rpm, its 1x at 50 Hz in a band of 2 bins) an unbalance whose
 line stood 3-10 times the noise rms gained 6 nats, and was not named in 3 of 6 foreign
 records; with the line's band 18 bins wide it was named in those 3 (2 confident)."""
-SPEED_TOLERANCE = 0.01
-"""Relative tolerance of the running speed written in a recording (lines within it of 1x
-count as synchronous; locate.py's 1x tests and speed search use it too)."""
 
 
 def alias_hz(f: float, fs: float) -> float:

@@ -48,7 +48,8 @@ from scipy.ndimage import median_filter, uniform_filter1d
 from scipy.optimize import minimize_scalar
 
 from bayes_amb.control.discrete import ss_freqresp_modal
-from bayes_amb.discrepancy.likelihood import SPEED_TOLERANCE, RobustWhittle, alias_hz
+from bayes_amb.discrepancy.likelihood import RobustWhittle, alias_hz
+from bayes_amb.inference.narrow_lines import SPEED_TOLERANCE
 from bayes_amb.rig import CHANNELS
 
 ALPHA = 0.01

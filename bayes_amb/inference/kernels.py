@@ -14,7 +14,7 @@ it bin by bin in registers,
 in the same arithmetic, term by term, as the numpy path (only the order of the sums
 differs, so the two agree to a few units of rounding per term: tests/test_kernels.py).
 :func:`logdet_and_trace` is the 4 x 4 Cholesky algebra of
-``bayes_amb.inference.whittle._logdet_and_trace``, band by band.
+``bayes_amb.inference.band_algebra.logdet_and_trace_numpy``, band by band.
 
 Compiled on first use and cached on disk (numba ``cache=True``); single-threaded (the
 parallelism is the batch over walkers and the tool's own worker pools). Which path a
@@ -352,7 +352,8 @@ def _logdet_and_trace(Phi, P, logdet, quad, ok):  # pragma: no cover - compiled
 def logdet_and_trace(Phi: NDArray, P: NDArray) -> tuple[NDArray, NDArray, NDArray]:
     """log det Phi, tr(Phi^-1 P) and positive definiteness, for (nb, n_bands, n, n) stacks.
 
-    The same Cholesky algebra as ``bayes_amb.inference.whittle._logdet_and_trace``.
+    The same Cholesky algebra as
+    ``bayes_amb.inference.band_algebra.logdet_and_trace_numpy``.
     """
     shape = Phi.shape[:2]
     logdet, quad = np.empty(shape), np.empty(shape)

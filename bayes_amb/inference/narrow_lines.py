@@ -23,10 +23,10 @@ of its largest channel passes LINE_P, Bonferroni over the bins and channels. The
 own scatter fattens the tail of u (taken as Exp(1), the test found a line in 2 of 300
 records of pure noise at LINE_P = 1e-3): the threshold bounds P(u > t) <= E exp(-t m / ln 2)
 over one side's median m (the larger of two medians is at least either), whose moment
-generating function is exact (Renyi's representation of exponential order statistics). Never lines: bins
-where the excitation itself stands out (a multisine's lines: EXCITED times the local level
-of |x|^2; their power is the model's to explain) and the lowest LOW_BINS bins (the record's
-offset and drift). Adjacent line bins are one line.
+generating function is exact (Renyi's representation of exponential order statistics).
+Never lines: bins where the excitation itself stands out (a multisine's lines: EXCITED
+times the local level of |x|^2; their power is the model's to explain) and the lowest
+LOW_BINS bins (the record's offset and drift). Adjacent line bins are one line.
 
 What it costs: the information of the bins left out, a few of thousands. On a record
 without lines nothing is left out and the likelihood is as it was.
@@ -42,7 +42,7 @@ from numpy.lib.stride_tricks import sliding_window_view
 from numpy.typing import NDArray
 from scipy.optimize import brentq
 
-CHANNELS = ("Ax", "Ay", "Bx", "By")
+from bayes_amb.rig import CHANNELS
 
 HALF = 32
 """Bins on each side whose median is the local level."""
@@ -60,9 +60,10 @@ excitation's (a multisine's line), never a line to leave out."""
 LOW_BINS = 2
 """The lowest bins, the record's offset and drift: never lines."""
 
-SYNCHRONOUS_TOL = 0.01
-"""A line within this share of the running speed (or 2 bins) of a multiple of it is
-synchronous (unbalance, runout)."""
+SPEED_TOLERANCE = 0.01
+"""Relative tolerance of the running speed written in a recording: a line within it (or 2
+bins) of a multiple of the speed is synchronous (unbalance, runout). The diagnosis' 1x
+band and locate.py's 1x tests and speed search use it too."""
 
 
 def local_level(p: NDArray, half: int = HALF, guard: int = GUARD) -> NDArray:
@@ -154,10 +155,10 @@ def find_narrow_lines(R: NDArray, X: NDArray, f_hz: NDArray, speed_rpm: float | 
 
 
 def _synchronous(f: float, speed_rpm: float | None, df: float) -> bool:
-    """Whether f is a multiple of the running speed (within SYNCHRONOUS_TOL of it or two
+    """Whether f is a multiple of the running speed (within SPEED_TOLERANCE of it or two
     bins)."""
     if not speed_rpm:
         return False
     f_rot = speed_rpm / 60.0
     order = round(f / f_rot)
-    return order >= 1 and abs(f - order * f_rot) <= max(SYNCHRONOUS_TOL * f_rot, 2 * df)
+    return order >= 1 and abs(f - order * f_rot) <= max(SPEED_TOLERANCE * f_rot, 2 * df)

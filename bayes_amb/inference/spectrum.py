@@ -54,6 +54,7 @@ from scipy import optimize, stats
 from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.inference.hermitian_kernels import spectrum_terms
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS
+from bayes_amb.rig import CHANNELS
 
 KNOTS = 32
 """Knots of each source's log-intensity, spaced evenly in log frequency over the band (fewer
@@ -93,7 +94,6 @@ LPM_DEGREE = 2
 """Degree in frequency of the local polynomial of the excitation's FRF (cleaned_band_sums)."""
 
 SOURCES = ("sensor noise", "r1", "r2")
-CHANNELS = ("Ax", "Ay", "Bx", "By")
 
 
 @dataclass(frozen=True)

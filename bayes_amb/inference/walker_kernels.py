@@ -14,8 +14,8 @@ form of that kernel (bayes_amb.inference.block_sums; the same results bit for bi
 
 :func:`whittle_terms` is the band algebra of the Whittle likelihood with the spectral
 densities formed in place: Phi_b = n sum_s sigma_s^2 Phi_{s,b}, its Cholesky factor, log det
-Phi_b and tr(Phi_b^-1 P_b), as ``whittle._logdet_and_trace`` computes them but with one
-logarithm per band (of the product of the pivots) instead of one per pivot; for 4 channels
+Phi_b and tr(Phi_b^-1 P_b), as ``band_algebra.logdet_and_trace_numpy`` computes them but
+with one logarithm per band (of the product of the pivots) instead of one per pivot; for 4 channels
 and 3 noise sources written out (bayes_amb.inference.band_algebra; bit for bit the same).
 """
 
@@ -459,13 +459,13 @@ def whittle_terms(sig2: NDArray, phi_sources: NDArray, scale: float, P: NDArray,
 
     Examples
     --------
-    >>> from bayes_amb.inference.whittle import _logdet_and_trace
+    >>> from bayes_amb.inference.band_algebra import logdet_and_trace_numpy
     >>> rng = np.random.default_rng(0)
     >>> A = rng.standard_normal((2, 5, 4, 4)) + 1j * rng.standard_normal((2, 5, 4, 4))
     >>> ps = A @ np.conj(np.swapaxes(A, -1, -2))
     >>> sig2, P = np.array([[1.0, 0.5], [2.0, 0.1]]), ps[::-1]
     >>> Phi = 3.0 * np.einsum("bs,sfij->bfij", sig2, ps)
-    >>> new, old = whittle_terms(sig2, ps, 3.0, P), _logdet_and_trace(Phi, P)
+    >>> new, old = whittle_terms(sig2, ps, 3.0, P), logdet_and_trace_numpy(Phi, P)
     >>> bool(np.allclose(new[0], old[0]) and np.allclose(new[1], old[1]))
     True
     """

@@ -48,10 +48,11 @@ from scipy.signal import lfilter
 from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference import band_algebra, kernels, walker_kernels
+from bayes_amb.inference.band_algebra import logdet_and_trace_numpy
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
 from bayes_amb.inference.fused import FusedLikelihood
-from bayes_amb.inference.prewhitening import data_prewhitening, minimum_phase_inverse
 from bayes_amb.inference.narrow_lines import NarrowLines, find_narrow_lines
+from bayes_amb.inference.prewhitening import data_prewhitening, minimum_phase_inverse
 from bayes_amb.inference.row_memory import RowMemory
 from bayes_amb.inference.spectrum import LearnedSpectrum, fold_colour
 
@@ -68,50 +69,6 @@ def band_edges(n_bins: int, n_bands: int = 256) -> NDArray:
     edges = np.unique(np.round(np.geomspace(1, n_bins + 1, n_bands + 1)).astype(int)) - 1
     edges = edges[edges < n_bins]
     return edges
-
-
-def _logdet_and_trace(Phi: NDArray, P: NDArray) -> tuple[NDArray, NDArray, NDArray]:
-    """log det Phi and tr(Phi^-1 P) for stacks (..., n, n) of Hermitian matrices, and
-    whether each Phi is positive definite (where it is not, the values are meaningless).
-
-    Cholesky Phi = L L^H, M = L^-1 and tr(M P M^H), all written out elementwise over the
-    stack (for 4 x 4 matrices, a few dozen array operations beat one LAPACK call per
-    matrix by an order of magnitude).
-    """
-    n = Phi.shape[-1]
-    A = [[Phi[..., i, j] for j in range(n)] for i in range(n)]
-    L: list[list[NDArray]] = [[None] * n for _ in range(n)]  # type: ignore[list-item]
-    ok = np.ones(Phi.shape[:-2], dtype=bool)
-    logdet = np.zeros(Phi.shape[:-2])
-    for j in range(n):
-        s = A[j][j].real - sum((np.abs(L[j][k]) ** 2 for k in range(j)),
-                               start=np.zeros(Phi.shape[:-2]))
-        good = s > 0
-        ok &= good
-        d = np.sqrt(np.where(good, s, 1.0))
-        logdet += 2 * np.log(d)
-        L[j][j] = d
-        for i in range(j + 1, n):
-            acc = A[i][j]
-            for k in range(j):
-                acc = acc - L[i][k] * np.conj(L[j][k])
-            L[i][j] = acc / d
-    M: list[list[NDArray]] = [[None] * n for _ in range(n)]  # type: ignore[list-item]
-    for i in range(n):
-        M[i][i] = 1.0 / L[i][i]
-        for j in range(i):
-            acc = L[i][j] * M[j][j]
-            for k in range(j + 1, i):
-                acc = acc + L[i][k] * M[k][j]
-            M[i][j] = -acc / L[i][i]
-    quad = np.zeros(Phi.shape[:-2])
-    for i in range(n):                       # row i of M P M^H: sum_jk M_ij P_jk conj(M_ik)
-        for k in range(i + 1):
-            v = M[i][0] * P[..., 0, k]
-            for j in range(1, i + 1):
-                v = v + M[i][j] * P[..., j, k]
-            quad += (v * np.conj(M[i][k])).real
-    return logdet, quad, ok
 
 
 class WhittleLikelihood(RowMemory):
@@ -491,7 +448,7 @@ class WhittleLikelihood(RowMemory):
                 if self.engine.compiled:
                     logdet, quad, ok = kernels.logdet_and_trace(Phi, Pb)
                 else:
-                    logdet, quad, ok = _logdet_and_trace(Phi, Pb)
+                    logdet, quad, ok = logdet_and_trace_numpy(Phi, Pb)
         ll = -(self.counts * (logdet + 4 * np.log(np.pi)) + quad)
         bad = ~stable | ~np.all(ok, axis=1) | ~np.all(np.isfinite(ll), axis=1)
         ll[bad] = -np.inf
