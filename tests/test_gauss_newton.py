@@ -4,21 +4,24 @@ Identity tests: the linear model at its own point is the exact log posterior, it
 is the exact gradient (up to the forward-difference step of J), and it is exact in the
 noise intensities. Search tests: from the same start it reaches the optimum that L-BFGS-B
 with central-difference gradients reaches (a stationary point of the exact posterior), and
-the eq. 15 estimate equals identification's least_squares_theta.
+the eq. 15 estimate (Gauss-Newton) reaches the L-BFGS-B minimum.
 """
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+import scipy.optimize as so
 
 from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import ActuatorLag, SensorGain
 from bayes_amb.discrepancy import gauss_newton as gn
 from bayes_amb.discrepancy.fitting import build, extend, fit_nominal
-from bayes_amb.inference.estimate import least_squares_theta, local_search
+from bayes_amb.inference.estimate import LogPosterior, least_squares_theta, local_search
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
+from bayes_amb.inference.priors import PriorSet
+from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, parse_effect, simulate_recording
 
@@ -146,11 +149,35 @@ def test_search_leaves_a_bound_the_nominal_fit_absorbed_the_lag_on(case):
     assert x_lb[3] > -0.5 and post(x_lb[None])[0] > f_gn - 0.1
 
 
-def test_least_squares_start_equals_the_identification_estimate(case):
+def _eq15_lbfgs(like, theta0, bounds):
+    """The eq. 15 cost minimised by L-BFGS-B with central differences (the search both
+    MAPs started from before the Gauss-Newton one): the reference."""
+    h = np.full(theta0.size, 1e-6)
+
+    def fun(th):
+        v = like.sum_squares(np.vstack([th, th + np.diag(h), th - np.diag(h)]))
+        return float(v[0]), (v[1:th.size + 1] - v[th.size + 1:]) / (2 * h)
+
+    return so.minimize(fun, theta0, jac=True, method="L-BFGS-B", bounds=bounds,
+                       options={"maxiter": 500, "ftol": 1e-15, "gtol": 1e-10}).x
+
+
+def test_least_squares_start_reaches_the_lbfgs_minimum(case):
+    """The diagnosis' eq. 15 start and identify's first stage (both Gauss-Newton,
+    inference/least_squares.py) reach the minimum L-BFGS-B reaches, in a few batches."""
     rec, eps = case
     _, _, post = build(rec, NAMES, eps)
+    n0 = post.n_evals
     theta_gn = gn.least_squares_start(post, np.zeros(4))
-    theta_lb = least_squares_theta(post, "lbfgs", np.zeros(4))
+    assert post.n_evals - n0 <= 8 * (4 + 2) + 1
+    ipost = LogPosterior(WhittleLikelihood(ForwardModel(rec, NAMES), eps),
+                         PriorSet.build(NAMES))
+    theta_id = least_squares_theta(ipost, "lbfgs", np.zeros(4))
+    theta_lb = _eq15_lbfgs(post.likelihood, np.zeros(4), post.bounds()[:4])
     cost_gn, cost_lb = post.likelihood.sum_squares(np.vstack([theta_gn, theta_lb]))
     assert cost_gn <= cost_lb * (1 + 1e-10)
     assert np.allclose(theta_gn, theta_lb, rtol=0, atol=1e-5)
+    theta_ilb = _eq15_lbfgs(ipost.likelihood, np.zeros(4), ipost.bounds()[:4])
+    cost_id, cost_ilb = ipost.likelihood.sum_squares(np.vstack([theta_id, theta_ilb]))
+    assert cost_id <= cost_ilb * (1 + 1e-10)
+    assert np.allclose(theta_id, theta_ilb, rtol=0, atol=1e-5)

@@ -32,6 +32,7 @@ from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior
 from bayes_amb.io.recording import Recording
+from bayes_amb.threads import limited_threads
 
 
 @dataclass(frozen=True)
@@ -158,6 +159,7 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
     return checks, with_learned_noise(taken.fitted) if learn else taken.fitted, taken.eps
 
 
+@limited_threads
 def assess(recording: Recording, names: tuple[str, ...],
            priors: dict[str, Prior] | None = None, seed: int = 0) -> Adequacy:
     """Adequacy of the model with the named parameters free for one recording."""
@@ -177,8 +179,9 @@ def assess_fit(recording: Recording, names: tuple[str, ...],
     if not np.isfinite(nominal.log_post):
         return Adequacy(False, "model NOT adequate: no parameter value in the prior gives a "
                         "finite likelihood", failed=["fit"]), nominal
+    # the verdict reads the location's tests, not its posterior predictive p-values
     loc = locate(nominal.like, nominal.params, nominal.log10_sigma, nominal.cov,
-                 LocateOptions(seed=seed))
+                 LocateOptions(seed=seed, n_ppc=0))
     verdict = judge(checks, loc, worst_nrmse(nominal, eps))
     if band_hz == "validity":
         band_hz = nominal.forward.validity_band_hz()

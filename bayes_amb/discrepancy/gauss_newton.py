@@ -35,6 +35,7 @@ from numpy.typing import NDArray
 from bayes_amb.discrepancy.likelihood import P_CH, RobustWhittle
 from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.hermitian_kernels import linear_terms
+from bayes_amb.inference.least_squares import box, gauss_newton_least_squares
 from bayes_amb.inference.priors import Prior
 
 _LN10 = np.log(10.0)
@@ -299,46 +300,11 @@ def gauss_newton(post: LogPosterior, x0: NDArray, cols: NDArray | None = None,
     return x, f
 
 
-def _quadratic(d: NDArray, H: NDArray, g: NDArray) -> tuple[float, NDArray]:
-    return float(d @ H @ d + 2 * g @ d), 2 * (H @ d + g)
-
-
 def least_squares_start(post: LogPosterior, theta0: NDArray, max_iter: int = 8
                         ) -> NDArray:
     """The paper's eq. 15 estimate, argmin sum_k |R_k(theta)|^2 over the prior box, by
-    Gauss-Newton: on the linear model the cost is w^T T w with T[a, c] = sum_b Re tr
-    M_b[a, c], a bounded quadratic; a step is kept while the exact cost falls."""
-    like: RobustWhittle = post.likelihood  # type: ignore[assignment]
-    p = post.p
-    cols = np.arange(p)
-    bnds = post.bounds()[:p]
-    lo = np.array([-np.inf if b[0] is None else b[0] for b in bnds])
-    hi = np.array([np.inf if b[1] is None else b[1] for b in bnds])
-    theta = np.clip(np.asarray(theta0, dtype=float), lo, hi)
-    x = np.concatenate([theta, np.zeros(3)])
-    cost = float(like.sum_squares(theta[None])[0])
-    for _ in range(max_iter):
-        lin = linearise(post, x, cols)
-        if lin is None:
-            break
-        n_a = cols.size + 1
-        T = np.trace(lin.MT.reshape(n_a, -1, P_CH, P_CH, n_a), axis1=2, axis2=3)
-        T = T.sum(axis=1).real                                       # (A, A)
-        res = so.minimize(_quadratic, np.zeros(p), args=(T[1:, 1:], T[1:, 0]), jac=True,
-                          method="L-BFGS-B",
-                          bounds=list(zip(lo - theta, hi - theta, strict=True)),
-                          options={"maxiter": 500, "ftol": 1e-15, "gtol": 1e-12})
-        step = res.x
-        for _ in range(10):
-            new = float(like.sum_squares((theta + step)[None])[0])
-            if new < cost:
-                break
-            step = 0.5 * step
-        else:
-            break
-        converged = cost - new < 1e-10 * cost
-        theta, cost = theta + step, new
-        x[:p] = theta
-        if converged:
-            break
+    Gauss-Newton (inference/least_squares.py, as identify's MAP starts)."""
+    theta, _, rows = gauss_newton_least_squares(post.likelihood, *box(post.bounds()[:post.p]),
+                                                theta0, max_iter, _STEP)
+    post.n_evals += rows
     return theta

@@ -59,7 +59,9 @@ ALPHA = 0.01
 @dataclass(frozen=True)
 class LocateOptions:
     """Band layout and test settings: n_bands (log-spaced, merged to >= min_bins each),
-    ljung_box lags, cross-correlation lags, time windows, posterior predictive draws."""
+    ljung_box lags, cross-correlation lags, time windows, posterior predictive draws (0:
+    none, and no posterior predictive p-values; identify's adequacy test, which reports
+    only the verdict, takes none)."""
 
     n_bands: int = 24
     min_bins: int = 16
@@ -400,7 +402,7 @@ def locate(like: RobustWhittle, P_hat: NDArray, log10_sigma: NDArray,
                             "lines": np.array([line_p]), "windows": win_p})
     adj_f.update(_holm_families({"floor": floor_p, "whiteness": lb_p}))
     obs = (-np.log10(max(coh_p.min(), 1e-300)), float(np.sum(np.abs(W) ** 2)))
-    ppc = _ppc(like, P_hat, cov, L, bands, obs, opt)
+    ppc = _ppc(like, P_hat, cov, L, bands, obs, opt) if opt.n_ppc > 0 else None
     sig_coh = adj_f["coherence"].reshape(coh_p.shape) < ALPHA
     findings: list[dict[str, Any]] = []
     for b in np.flatnonzero(sig_coh.any(axis=1)):

@@ -14,6 +14,7 @@ import scipy.optimize as so
 from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
+from bayes_amb.inference.least_squares import box, gauss_newton_least_squares
 from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.threads import limited_threads
@@ -216,32 +217,23 @@ def _theta_start(post: LogPosterior) -> NDArray:
 
 
 def least_squares_theta(post: LogPosterior, method: str, theta0: NDArray) -> NDArray:
-    """Stage 1: minimise the paper's eq. 15 cost sum |eps - S(theta) x|^2 over theta."""
+    """Stage 1: minimise the paper's eq. 15 cost sum |eps - S(theta) x|^2 over theta, by
+    Gauss-Newton (least_squares.py; "nelder-mead": the paper's fminsearch)."""
     like = post.likelihood
     bounds = post.bounds()[:post.p]
+    if method != "nelder-mead":
+        theta, _, rows = gauss_newton_least_squares(like, *box(bounds), theta0)
+        post.n_evals += rows
+        return theta
 
     def cost(th: NDArray) -> float:
         v = float(like.sum_squares(th[None])[0])
         return v if np.isfinite(v) else _BIG
 
-    if method == "nelder-mead":
-        res = so.minimize(cost, theta0, method="Nelder-Mead",
-                          options={"xatol": 1e-9, "fatol": 1e-12, "maxiter": 20000,
-                                   "adaptive": True})
-    else:
-        h = np.full(post.p, 1e-6)
-
-        def fun(th: NDArray) -> tuple[float, NDArray]:
-            pts = np.vstack([th, th + np.diag(h), th - np.diag(h)])
-            v = like.sum_squares(pts)
-            if not np.isfinite(v[0]):
-                return _BIG, np.zeros_like(th)
-            g = (v[1:post.p + 1] - v[post.p + 1:]) / (2 * h)
-            return float(v[0]), np.where(np.isfinite(g), g, 0.0)
-
-        res = so.minimize(fun, theta0, jac=True, method="L-BFGS-B", bounds=bounds,
-                          options={"maxiter": 500, "ftol": 1e-15, "gtol": 1e-10})
-    post.n_evals += res.nfev * (1 if method == "nelder-mead" else 2 * post.p + 1)
+    res = so.minimize(cost, theta0, method="Nelder-Mead",
+                      options={"xatol": 1e-9, "fatol": 1e-12, "maxiter": 20000,
+                               "adaptive": True})
+    post.n_evals += res.nfev
     return np.asarray(res.x, dtype=float)
 
 
