@@ -46,8 +46,8 @@ def test_a_map_estimate_moved_by_a_twentieth_of_its_sd_fails():
     par["mean"] += 5 * SD_FRACTION * par["sd"]
     diff = differences(got, gold)
     assert len(diff) == 1 and "parameters.k_By.mean" in diff[0]
-    got = copy.deepcopy(gold)
-    got["parameters"]["c_Bx"]["hdi90"][0] -= 0.25 * gold["parameters"]["c_Bx"]["sd"]
+    got = copy.deepcopy(gold)            # 0.5 sd: 5 sd of two 4000-draw HDI ends' difference
+    got["parameters"]["c_Bx"]["hdi90"][0] -= 0.5 * gold["parameters"]["c_Bx"]["sd"]
     assert any("c_Bx.hdi90[0]" in d for d in differences(got, gold))
     got = copy.deepcopy(gold)
     got["parameters"]["c_Bx"]["sd"] *= 1.05
@@ -70,6 +70,32 @@ def test_a_sampled_estimate_is_compared_within_its_monte_carlo_error():
     assert differences(got, gold) == []
     got["parameters"][name]["mean"] += 0.5 * sd                # half a posterior sd
     assert any(f"parameters.{name}.mean" in d for d in differences(got, gold))
+
+
+def test_hdi_ends_are_compared_within_their_cube_root_monte_carlo_error():
+    """HDI_MC is what HDI ends of normal draws scatter by (fitstats.hdi, 4000 draws, 400
+    sets): within 25 % of 1.1 N^(-1/3) sd; and two independent sets' ends pass the
+    comparison in at least 99 % (a 4000-draw end's rule is HDI_Z = 3.3 sd of their
+    difference, so about 0.1 % fail by chance; the bound leaves room for 400 sets)."""
+    import numpy as np
+
+    from bayes_amb.discrepancy.fitstats import hdi
+    from tests.golden.compare import HDI_MC
+
+    rng = np.random.default_rng(3)
+    n = 4000
+    ends = np.array([hdi(rng.standard_normal(n)) for _ in range(400)])
+    assert abs(ends[:, 0].std() / (HDI_MC * n ** (-1 / 3)) - 1) < 0.25
+    gold = _golden("control_force_07", "summary")
+    block = gold["parameters"]["c_Bx"]
+    passed = 0
+    for a, b in zip(ends[:200], ends[200:], strict=True):
+        got = copy.deepcopy(gold)
+        shift = (a - b) * block["sd"]
+        got["parameters"]["c_Bx"]["hdi90"] = [block["hdi90"][0] + shift[0],
+                                             block["hdi90"][1] + shift[1]]
+        passed += not any("c_Bx.hdi90" in d for d in differences(got, gold))
+    assert passed >= 198
 
 
 def test_a_sampler_count_moves_by_its_ceiling_not_by_more():
@@ -127,6 +153,13 @@ def test_a_check_on_rounding_compares_no_p_value():
 
 
 def test_a_doubted_models_intervals_are_compared_within_a_twentieth_of_their_sd():
+    gold = _golden("actuator_gain_00", "summary")
+    assert "parameters_model_only" in gold and not gold["adequacy"]["adequate"]
+    got = copy.deepcopy(gold)                 # the sd too, relative: 1.4 % on another build
+    got["parameters"]["k_Ax"]["sd"] *= 1.03
+    assert differences(got, gold) == []
+    got["parameters"]["k_Ax"]["sd"] *= 1.03
+    assert any("parameters.k_Ax.sd" in d for d in differences(got, gold))
     gold = _golden("probe_angle_01", "summary")
     assert "parameters_model_only" in gold and not gold["adequacy"]["adequate"]
     got = copy.deepcopy(gold)
