@@ -134,3 +134,32 @@ def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_ident
     assert kept.noise.lines_left_out is None
     assert kept.noise.spectrum.lines is not None and len(kept.noise.spectrum.lines) == 1
     assert "lines taken as noise: 150 Hz" in kept.noise.spectrum.line
+
+
+def test_identifys_adequacy_fit_leaves_the_line_out_and_the_diagnosis_keeps_it():
+    """The same 150 Hz line on Ax: identify's adequacy test (nominal_assessment with
+    learn) fits without its bin, as identify's likelihood has it, with each band's prior
+    weight following its bin count; the diagnosis' nominal fit keeps it (its band spectra
+    absorb a mains line, and a line at the running speed is physics it names)."""
+    from dataclasses import replace
+
+    from bayes_amb.discrepancy.adequacy import nominal_assessment
+    from bayes_amb.discrepancy.likelihood import P_CH
+
+    rig = load_rig()
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    rec, _ = design_recording(rig, ctrl, Design(duration=1.0, amplitude=1.0),
+                              Noise(noise_rms=2e-8, r2_rms=0.01, r2_band_hz=60.0), seed=3)
+    y = np.array(rec.y, dtype=float)
+    t = np.arange(y.shape[0]) * rec.dt
+    y[:, 0] += 1e-7 * np.cos(2 * np.pi * 150.0 * t + 0.3)
+    rec = replace(rec, y=y)
+    names = ("k_By", "c_By")
+    for learn, kept in ((True, False), (False, True)):
+        _, fm, _ = nominal_assessment(rec, names, learn=learn)
+        like = fm.like
+        f = like.k / (like.n * like.forward.dt)
+        assert (np.min(np.abs(f - 150.0)) < 0.5) == kept, learn
+        assert like.counts.sum() == like.k.size
+        assert np.allclose(like.nu, like.prior_weight * like.counts + P_CH + 1.0)
+        assert np.isfinite(fm.log_post)

@@ -136,8 +136,9 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
                        ) -> tuple[DataChecks, FittedModel, np.ndarray]:
     """Data checks (with linearity and information), eps and the nominal fit: the start
     of a diagnosis. A clipping amplifier is modelled, not absorbed (clip_model.py). With
-    ``learn`` (identify's adequacy test) the noise spectrum is then learned from what is
-    left (fitting.with_learned_noise), as identify's own likelihood has it. The diagnosis
+    ``learn`` (identify's adequacy test) the record's narrowband lines leave the
+    likelihood before the fit and the noise spectrum is learned from what is left
+    (fitting.with_learned_noise), as identify's own likelihood has them. The diagnosis
     keeps the white sources with each band's spectrum integrated out: with the learned
     spectrum its models compared named a sensor gain and two runouts, confidently, on a
     foreign record whose only colour was a band-limited force, and gave tentative names to
@@ -146,7 +147,8 @@ def nominal_assessment(recording: Recording, names: tuple[str, ...],
     fwd = ForwardModel(recording, names)
     checks = run_checks(recording, loop_poles(fwd))
     eps = dual_youla_eps(fwd.parts, checks.y, checks.u)
-    nominal = fit_nominal(recording, names, eps, priors, seed=seed, start=checks.start)
+    nominal = fit_nominal(recording, names, eps, priors, seed=seed, start=checks.start,
+                          leave_out_lines=learn)
     if not np.isfinite(nominal.log_post):
         return checks, nominal, eps
     taken = take_in_clipping(recording, names, priors, seed, checks, fwd.parts, eps, nominal,

@@ -151,7 +151,8 @@ def _fit_taking_out(recording: Recording, names: tuple[str, ...],
     """The nominal fit on eps - T_r2 d, with T_r2 the r2 -> eps filter of the fit ``at``:
     the refit every modelled nonlinearity and every spread of its parameter makes."""
     return fit_nominal(recording, names, eps - r2_response(at.like.forward, at.params, d),
-                       priors, seed=seed, start=checks.start)
+                       priors, seed=seed, start=checks.start,
+                       leave_out_lines=at.like.lines_left_out is not None)
 
 
 def _params_of(fit: FittedModel, fallback: FittedModel) -> np.ndarray:

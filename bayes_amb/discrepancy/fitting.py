@@ -167,10 +167,16 @@ def learned_noise_map(post: LogPosterior, x: NDArray) -> NDArray:
 
 def fit_nominal(recording: Recording, params: tuple[str, ...], eps: NDArray,
                 priors: dict[str, Prior] | None = None, seed: int = 0,
-                start: int = 0) -> FittedModel:
+                start: int = 0, leave_out_lines: bool = False) -> FittedModel:
     """The nominal model's MAP over the whole band (nominal_map; ``seed`` is kept for the
-    interface: the search draws no random starts)."""
+    interface: the search draws no random starts). ``leave_out_lines``: the record's
+    narrowband lines leave the likelihood first, as identify's own likelihood has it
+    (WhittleLikelihood.leave_out_lines; identify's adequacy test). The diagnosis keeps
+    them: its bands' integrated spectra absorb a mains line, and a line at the running
+    speed is physics it names."""
     fwd, like, post = build(recording, params, eps, (), priors, start)
+    if leave_out_lines:
+        like.leave_out_lines(_theta_start(post))
     x = nominal_map(post)
     # from here on the noise filters stay at this fit (shared with the extended models)
     like.fixed_filters = like.phi_sources

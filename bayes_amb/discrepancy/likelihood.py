@@ -141,6 +141,11 @@ class RobustWhittle(WhittleLikelihood):
         self.lines: list[NDArray] = []
         self.fixed_filters = noise_filters
         super().__init__(forward, eps, n_bands=n_bands, f_max_hz=None, noise_model="loop")
+
+    def _set_bins(self, k: NDArray) -> None:
+        """The bins and bands (WhittleLikelihood), and each band's prior weight nu, scale
+        shift and Gamma term, which follow its bin count (also after leave_out_lines)."""
+        super()._set_bins(k)
         self.nu = self.prior_weight * self.counts + P_CH + 1.0
         self.shift = scale_shift(self.counts)
         self._gamma_term = (log_complex_gamma(self.nu + self.counts)
