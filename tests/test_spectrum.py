@@ -75,14 +75,33 @@ def test_the_objectives_gradient_is_its_derivative(compiled):
     assert np.allclose(grad, num, rtol=1e-5, atol=1e-6 * abs(val))
 
 
-@pytest.fixture(scope="module")
-def low_pass_identification():
+def _low_pass_record():
+    """1 s at 10 kHz, random binary 1 A, 20 nm sensor noise, r2 0.01 A below 60 Hz."""
     rig = load_rig()
     ctrl = export_controller(reference_controller(rig, 1e-4), rig)
     rec, _ = design_recording(rig, ctrl, Design(duration=1.0, amplitude=1.0),
                               Noise(noise_rms=2e-8, r2_rms=0.01, r2_band_hz=60.0), seed=3)
-    return identify(rec, BEARING_COEFFICIENTS,
+    return rec
+
+
+@pytest.fixture(scope="module")
+def low_pass_identification():
+    return identify(_low_pass_record(), BEARING_COEFFICIENTS,
                     options=IdentifyOptions(map_only=True, adequacy=False))
+
+
+@pytest.fixture(scope="module")
+def line_record():
+    """The low-pass force record with a 150 Hz line added to the Ax probe (100 nm, five
+    times the sensor noise's rms, above the force's band, on the measurement after the
+    fact)."""
+    from dataclasses import replace
+
+    rec = _low_pass_record()
+    y = np.array(rec.y, dtype=float)
+    t = np.arange(y.shape[0]) * rec.dt
+    y[:, 0] += 1e-7 * np.cos(2 * np.pi * 150.0 * t + 0.3)
+    return replace(rec, y=y)
 
 
 def test_a_low_pass_force_is_learned_where_it_is(low_pass_identification):
@@ -99,22 +118,13 @@ def test_a_low_pass_force_is_learned_where_it_is(low_pass_identification):
         assert g[f < 40].mean() - g[f > 200].mean() > 10, ch
 
 
-def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_identification):
-    """A 150 Hz line added to the Ax probe of the low-pass force record (100 nm, five times
-    the sensor noise's rms, above the force's band, on the measurement after the fact):
-    its bin is left out of the likelihood before the fit and reported as a line at 150 Hz
-    on Ax, not synchronous, and no other line; the record without it has none. With
-    leave_out_lines=False the learned spectrum takes it as noise instead, as before."""
-    from dataclasses import replace
-
-    rig = load_rig()
-    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
-    rec, _ = design_recording(rig, ctrl, Design(duration=1.0, amplitude=1.0),
-                              Noise(noise_rms=2e-8, r2_rms=0.01, r2_band_hz=60.0), seed=3)
-    y = np.array(rec.y, dtype=float)
-    t = np.arange(y.shape[0]) * rec.dt
-    y[:, 0] += 1e-7 * np.cos(2 * np.pi * 150.0 * t + 0.3)
-    res = identify(replace(rec, y=y), BEARING_COEFFICIENTS,
+def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_identification,
+                                                                  line_record):
+    """The 150 Hz line on Ax (line_record): its bin is left out of the likelihood before
+    the fit and reported as a line at 150 Hz on Ax, not synchronous, and no other line; the
+    record without it has none. With leave_out_lines=False the learned spectrum takes it as
+    noise instead, as before."""
+    res = identify(line_record, BEARING_COEFFICIENTS,
                    options=IdentifyOptions(map_only=True, adequacy=False))
     out = res.noise.lines_left_out
     assert out is not None and len(out) == 1, out
@@ -128,7 +138,7 @@ def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_ident
     assert "lines left out of the likelihood (1 bins): 150 Hz" in format_summary(res)
     assert res.noise.spectrum is None or not res.noise.spectrum.lines
     assert low_pass_identification.noise.lines_left_out is None
-    kept = identify(replace(rec, y=y), BEARING_COEFFICIENTS,
+    kept = identify(line_record, BEARING_COEFFICIENTS,
                     options=IdentifyOptions(map_only=True, adequacy=False,
                                             leave_out_lines=False))
     assert kept.noise.lines_left_out is None
@@ -136,27 +146,17 @@ def test_a_mains_line_is_left_out_and_reported_with_its_frequency(low_pass_ident
     assert "lines taken as noise: 150 Hz" in kept.noise.spectrum.line
 
 
-def test_identifys_adequacy_fit_leaves_the_line_out_and_the_diagnosis_keeps_it():
+def test_identifys_adequacy_fit_leaves_the_line_out_and_the_diagnosis_keeps_it(line_record):
     """The same 150 Hz line on Ax: identify's adequacy test (nominal_assessment with
     learn) fits without its bin, as identify's likelihood has it, with each band's prior
     weight following its bin count; the diagnosis' nominal fit keeps it (its band spectra
     absorb a mains line, and a line at the running speed is physics it names)."""
-    from dataclasses import replace
-
     from bayes_amb.discrepancy.adequacy import nominal_assessment
     from bayes_amb.discrepancy.likelihood import P_CH
 
-    rig = load_rig()
-    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
-    rec, _ = design_recording(rig, ctrl, Design(duration=1.0, amplitude=1.0),
-                              Noise(noise_rms=2e-8, r2_rms=0.01, r2_band_hz=60.0), seed=3)
-    y = np.array(rec.y, dtype=float)
-    t = np.arange(y.shape[0]) * rec.dt
-    y[:, 0] += 1e-7 * np.cos(2 * np.pi * 150.0 * t + 0.3)
-    rec = replace(rec, y=y)
     names = ("k_By", "c_By")
     for learn, kept in ((True, False), (False, True)):
-        _, fm, _ = nominal_assessment(rec, names, learn=learn)
+        _, fm, _ = nominal_assessment(line_record, names, learn=learn)
         like = fm.like
         f = like.k / (like.n * like.forward.dt)
         assert (np.min(np.abs(f - 150.0)) < 0.5) == kept, learn

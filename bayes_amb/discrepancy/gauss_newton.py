@@ -35,8 +35,8 @@ from numpy.typing import NDArray
 from bayes_amb.discrepancy.likelihood import P_CH, RobustWhittle
 from bayes_amb.inference.estimate import LogPosterior
 from bayes_amb.inference.hermitian_kernels import linear_terms
-from bayes_amb.inference.least_squares import box, gauss_newton_least_squares
-from bayes_amb.inference.priors import Prior
+from bayes_amb.inference.least_squares import gauss_newton_least_squares
+from bayes_amb.inference.priors import Prior, bound_arrays
 
 _LN10 = np.log(10.0)
 _STEP = 1e-5
@@ -255,9 +255,7 @@ def gauss_newton(post: LogPosterior, x0: NDArray, cols: NDArray | None = None,
     less than tol nats; returns the point and its (exact) log posterior."""
     p = post.p
     cols = np.arange(p) if cols is None else np.asarray(cols)
-    bnds = post.bounds()
-    blo = np.array([-np.inf if b[0] is None else b[0] for b in bnds])
-    bhi = np.array([np.inf if b[1] is None else b[1] for b in bnds])
+    blo, bhi = bound_arrays(post.bounds())
     width = np.where(np.isfinite(bhi - blo), bhi - blo, 1.0)
     x = np.asarray(x0, dtype=float).copy()
     f = float(post(x[None])[0])
@@ -304,7 +302,8 @@ def least_squares_start(post: LogPosterior, theta0: NDArray, max_iter: int = 8
                         ) -> NDArray:
     """The paper's eq. 15 estimate, argmin sum_k |R_k(theta)|^2 over the prior box, by
     Gauss-Newton (inference/least_squares.py, as identify's MAP starts)."""
-    theta, _, rows = gauss_newton_least_squares(post.likelihood, *box(post.bounds()[:post.p]),
-                                                theta0, max_iter, _STEP)
+    lo, hi = bound_arrays(post.bounds()[:post.p])
+    theta, _, rows = gauss_newton_least_squares(post.likelihood, lo, hi, theta0, max_iter,
+                                                _STEP)
     post.n_evals += rows
     return theta

@@ -57,6 +57,7 @@ from bayes_amb.discrepancy.gauss_newton import (
     maximise_in_box,
 )
 from bayes_amb.inference.estimate import LogPosterior
+from bayes_amb.inference.priors import bound_arrays
 
 NESTED_TOL = 1e-3
 """Nats: a candidate is nested when the log posterior at its null differs from the current
@@ -119,8 +120,7 @@ def linear_screen(post: LogPosterior, x0: NDArray, idx: NDArray, base: float,
     ``exact`` declares the residual affine in these parameters."""
     p = post.p
     bnds = post.bounds()
-    lo = np.array([-np.inf if bnds[j][0] is None else bnds[j][0] for j in idx])
-    hi = np.array([np.inf if bnds[j][1] is None else bnds[j][1] for j in idx])
+    lo, hi = bound_arrays([bnds[j] for j in idx])
     log_prior_null = float(sum(post.priors.priors[j].logpdf(np.array([x0[j]]))[0]
                                for j in idx))
     lin = linearise(post, x0, idx)

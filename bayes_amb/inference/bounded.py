@@ -43,6 +43,7 @@ from bayes_amb.inference.estimate import (
     hessian_covariance,
 )
 from bayes_amb.inference.posterior import draws_row
+from bayes_amb.inference.priors import bound_arrays
 
 INWARD_STEPS = 2.5
 """How far (in Hessian steps) a bound coordinate is moved inward for the expansion (its
@@ -101,9 +102,7 @@ def bounded_laplace(post: Any, x: NDArray) -> BoundedLaplace | None:
     LogPosterior, or joint_sampling.JointLogPosterior (x then holds each record's noise)."""
     p = post.p
     bound = at_prior_bound(post, x)[:p]
-    box = post.bounds()[:p]
-    lo = np.array([-np.inf if b[0] is None else b[0] for b in box])
-    hi = np.array([np.inf if b[1] is None else b[1] for b in box])
+    lo, hi = bound_arrays(post.bounds()[:p])
     h = np.concatenate([_steps(post) * 10, np.zeros(x.size - post.p - 3)])
     x_in = np.array(x, dtype=float)
     for j in np.flatnonzero(bound):

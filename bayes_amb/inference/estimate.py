@@ -14,8 +14,8 @@ import scipy.optimize as so
 from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference.least_squares import box, gauss_newton_least_squares
-from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet
+from bayes_amb.inference.least_squares import gauss_newton_least_squares
+from bayes_amb.inference.priors import NOISE_LOG10_BOUNDS, PriorSet, bound_arrays
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.threads import limited_threads
 
@@ -222,7 +222,7 @@ def least_squares_theta(post: LogPosterior, method: str, theta0: NDArray) -> NDA
     like = post.likelihood
     bounds = post.bounds()[:post.p]
     if method != "nelder-mead":
-        theta, _, rows = gauss_newton_least_squares(like, *box(bounds), theta0)
+        theta, _, rows = gauss_newton_least_squares(like, *bound_arrays(bounds), theta0)
         post.n_evals += rows
         return theta
 
@@ -284,8 +284,7 @@ def _stationary(res: so.OptimizeResult, bounds: list[tuple[float | None, float |
                 ) -> bool:
     """Projected gradient (whitened units) below 1e-2: less than ~1e-4 nats are left."""
     g = np.asarray(res.jac, dtype=float)
-    lo = np.array([-np.inf if a is None else a for a, _ in bounds])
-    hi = np.array([np.inf if b is None else b for _, b in bounds])
+    lo, hi = bound_arrays(bounds)
     g = np.where((res.x <= lo + 1e-12) & (g > 0), 0.0, g)
     g = np.where((res.x >= hi - 1e-12) & (g < 0), 0.0, g)
     return bool(np.all(np.isfinite(g)) and np.max(np.abs(g), initial=0.0) < 1e-2)

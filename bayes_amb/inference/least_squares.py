@@ -31,13 +31,6 @@ class ResidualModel(Protocol):
     def sum_squares(self, theta: NDArray) -> NDArray: ...
 
 
-def box(bounds: list[tuple[float | None, float | None]]) -> tuple[NDArray, NDArray]:
-    """Lower and upper bounds as arrays (+-inf where a side is open)."""
-    lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds], dtype=float)
-    hi = np.array([np.inf if b[1] is None else b[1] for b in bounds], dtype=float)
-    return lo, hi
-
-
 def _quadratic(d: NDArray, H: NDArray, g: NDArray) -> tuple[float, NDArray]:
     return float(d @ H @ d + 2 * g @ d), 2 * (H @ d + g)
 

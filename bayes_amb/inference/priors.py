@@ -134,6 +134,21 @@ class Prior:
         return f"{self.kind}({self.a:g}, {self.b:g}{bounds})"
 
 
+def bound_arrays(bounds: list[tuple[float | None, float | None]]
+                 ) -> tuple[NDArray, NDArray]:
+    """Lower and upper bounds (LogPosterior.bounds(): None where a side is open) as float
+    arrays, +-inf where a side is open.
+
+    Examples
+    --------
+    >>> bound_arrays([(-0.8, 0.8), (None, 2)])
+    (array([-0.8, -inf]), array([0.8, 2. ]))
+    """
+    lo = np.array([-np.inf if b[0] is None else b[0] for b in bounds], dtype=float)
+    hi = np.array([np.inf if b[1] is None else b[1] for b in bounds], dtype=float)
+    return lo, hi
+
+
 def default_prior(name: str) -> Prior:
     """Default prior of a parameter name (see module docstring)."""
     spec = get_spec(name)
