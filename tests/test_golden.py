@@ -2,9 +2,10 @@
 identified with default options (tests/golden/, written by ``python -m tests.golden.cases``);
 every key and value of ``diagnosis.json`` and ``summary.json`` must match its golden copy,
 each number on its own scale (tests/golden/compare.py: estimates within a hundredth of
-their posterior sd, sampled ones within their Monte Carlo error, p-values on the decision
-scale; words, names and verdicts exactly), so the files hold on another CPU. The saved
-folders must load back to the same objects."""
+their posterior sd, a twentieth under a learned noise spectrum, sampled ones within their
+Monte Carlo error, p-values on the decision scale; words, names and verdicts exactly), so
+the files hold on another CPU (tests/test_golden_kernels.py: under another CPU's BLAS
+kernels). The saved folders must load back to the same objects."""
 
 from __future__ import annotations
 

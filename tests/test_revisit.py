@@ -37,7 +37,9 @@ def setup(monkeypatch):
               {"effect": "sensor_lag", "location": "B", "round": 2,
                "log_bayes_factor": 1859.0}]
     sel = Selection(nominal=_fm(()), final=r2, accepted=[r1, r2], scores=scores)
-    monkeypatch.setattr(rv, "_without", lambda final, i: _fm((second,)))
+    sel.rest_starts = []                    # the model each rest's refit also starts from
+    monkeypatch.setattr(rv, "_without", lambda final, i, before: (
+        sel.rest_starts.append(before), _fm((second,)))[1])
     monkeypatch.setattr(rv, "screen", lambda parent, cand, priors=None:
                         rv.Screen(cand, 0.0, {}))
     return sel, first, second
@@ -66,6 +68,7 @@ def test_a_better_alternative_replaces_the_first_choice(setup, monkeypatch):
     row = [s for s in out.scores if s["round"] == "revisit"]
     assert row[0]["instead_of"] == "actuator_2nd@both"
     assert row[0]["chosen_log_bayes_factor"] == 3525.1
+    assert sel.rest_starts == [sel.nominal]   # round 1's choice: the rest from the nominal
 
 
 def test_a_worse_alternative_changes_nothing(setup, monkeypatch):
