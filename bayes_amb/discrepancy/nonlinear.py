@@ -137,7 +137,7 @@ def slew_defect(u: NDArray, rate: float, dt: float, first_moment: bool = True) -
     first moment where it is (its phase right up to a few hundred Hz). first_moment=False
     holds the whole mean in its own sample (the cruder form: their difference is the
     scale of what the held form leaves out, clip_model._parameter_spread)."""
-    u = np.ascontiguousarray(u, dtype=float)
+    u = np.require(u, np.float64, ("C", "W"))     # one compiled signature (eigen.modal_batch)
     d = np.zeros_like(u)
     _ramp_defect(u, float(rate), float(dt), bool(first_moment), d)
     return d

@@ -156,9 +156,9 @@ def zoh_compiled(A: NDArray, B: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     >>> bool(np.allclose(F, F0, rtol=1e-13, atol=1e-14) and np.allclose(G, G0, rtol=1e-13))
     True
     """
-    A = np.ascontiguousarray(A, dtype=np.float64)
+    A = np.require(A, np.float64, ("C", "W"))     # one compiled signature (eigen.modal_batch)
     nb, n, _ = A.shape
-    B = np.ascontiguousarray(np.broadcast_to(B, (nb, n, B.shape[-1])), dtype=np.float64)
+    B = np.require(np.broadcast_to(B, (nb, n, B.shape[-1])), np.float64, ("C", "W"))
     F = np.empty((nb, n, n))
     G = np.empty((nb, n, B.shape[2]))
     _zoh(A, B, float(dt), F, G)

@@ -311,10 +311,14 @@ def modal_batch(A: NDArray, B: NDArray, C: NDArray
     >>> bool(ok.all() and np.allclose(Cm[0] @ (Bm[0] / (z - lam[0])[:, None]), H))
     True
     """
-    A = np.ascontiguousarray(A, dtype=np.float64)
+    # C-contiguous and writable, whatever the caller passed: the kernel then has one
+    # signature, the one the warm-up compiles (a read-only view, as np.broadcast_to gives
+    # where no broadcast is needed, is another type; it compiled for 7.6 s inside the first
+    # diagnosis of a rig whose batch came in whole)
+    A = np.require(A, np.float64, ("C", "W"))
     nb, n, _ = A.shape
-    B = np.ascontiguousarray(np.broadcast_to(B, (nb, n, B.shape[-1])), dtype=np.float64)
-    C = np.ascontiguousarray(np.broadcast_to(C, (nb, C.shape[-2], n)), dtype=np.float64)
+    B = np.require(np.broadcast_to(B, (nb, n, B.shape[-1])), np.float64, ("C", "W"))
+    C = np.require(np.broadcast_to(C, (nb, C.shape[-2], n)), np.float64, ("C", "W"))
     lam = np.zeros((nb, n), dtype=np.complex128)
     Bm = np.zeros((nb, n, B.shape[2]), dtype=np.complex128)
     Cm = np.zeros((nb, C.shape[1], n), dtype=np.complex128)
@@ -400,7 +404,7 @@ def final_state(lam: NDArray, Bm: NDArray, x: NDArray, tol: float) -> NDArray:
     in every eigenvalue of the batch at once; the second of two adjacent exactly conjugate
     eigenvalues takes the conjugate of the first's sum (the coefficients are real)."""
     xi = np.empty(lam.shape, dtype=np.complex128)
-    _final_state_batch(np.ascontiguousarray(lam, np.complex128),
-                       np.ascontiguousarray(Bm, np.complex128),
-                       np.ascontiguousarray(x, np.float64), float(tol), xi)
+    _final_state_batch(np.require(lam, np.complex128, ("C", "W")),   # one signature
+                       np.require(Bm, np.complex128, ("C", "W")),    # (modal_batch)
+                       np.require(x, np.float64, ("C", "W")), float(tol), xi)
     return xi

@@ -142,6 +142,7 @@ def error_form_compiled(A: NDArray, B: NDArray, C: NDArray, F: NDArray, L: NDArr
     A_S = np.empty((nb, 2 * n, 2 * n))
     B_S = np.empty((nb, 2 * n, B.shape[1]))
     LC = L @ C if LC is None else LC
-    _error_form(A, B, F, LC, np.ascontiguousarray(Ap, np.float64),
-                np.ascontiguousarray(Bp, np.float64), A_S, B_S)
+    def own(a: NDArray) -> NDArray:         # one compiled signature (eigen.modal_batch)
+        return np.require(a, np.float64, ("C", "W"))
+    _error_form(own(A), own(B), own(F), own(LC), own(Ap), own(Bp), A_S, B_S)
     return A_S, B_S, np.hstack([C, np.zeros_like(C)])

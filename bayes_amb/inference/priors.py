@@ -257,8 +257,8 @@ class PriorSet:
         table = self._table
         if table is not None:                       # compiled: the same operations
             out = np.empty(theta.shape[0])
-            _log_prior(np.asarray(theta, dtype=float), np.asarray(log10_sigma, dtype=float),
-                       *table, out)
+            _log_prior(np.require(theta, np.float64, ("C", "W")),   # one compiled signature
+                       np.require(log10_sigma, np.float64, ("C", "W")), *table, out)
             return out
         lp = np.zeros(theta.shape[0])
         for j, pr in enumerate(self.priors):
