@@ -242,3 +242,66 @@ def test_an_imported_transfer_function_is_realised_well_scaled():
     assert np.linalg.cond(np.linalg.eig(A)[1]) < 1e5
     assert np.abs(A).max() < 10 and np.abs(imp.controller.C).max() < 1e10
     assert imp.spectral_radius == pytest.approx(0.99258514, abs=1e-7)
+
+
+def test_fluid_film_bearings_and_seals_come_in_as_fixed_supports(tmp_path, capsys):
+    """A ROSS rotor with a cross-coupled fluid-film bearing and a seal with added mass besides
+    its two magnets converts (live and saved), each as a [[supports]] entry with ROSS's
+    coefficients at the nominal speed, and the closed loop has ROSS's eigenvalues, damped
+    and gyroscopic, at that speed."""
+    from bayes_amb.rig.ross import rig_from_ross
+
+    rotor = _rotor()
+    extra = [rs.BearingElement(n=17, kxx=4e6, kyy=5e6, kxy=1.5e6, kyx=-1.2e6, cxx=900.0,
+                               cyy=1100.0, cxy=60.0, cyx=-40.0, tag="journal"),
+             rs.SealElement(n=33, kxx=3e5, kyy=3e5, kxy=2e5, kyx=-2e5, cxx=250.0,
+                            cyy=250.0, mxx=0.05, myy=0.05, tag="seal")]
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rotor = rs.Rotor(rotor.shaft_elements, rotor.disk_elements,
+                         [*rotor.bearing_elements, *extra])
+        rotor.save(tmp_path / "rotor.toml")
+    rpm = 12000.0
+    conv = rig_from_ross(rotor, nominal_speed_rpm=rpm, first_mode_zeta=0.0)
+    assert [(s.name, s.node) for s in conv.rig.supports] == [("S1", 18), ("S2", 34)]
+    assert conv.rig.supports[0].matrix("k").tolist() == [[4e6, 1.5e6], [-1.2e6, 5e6]]
+    assert conv.rig.supports[1].matrix("m").tolist() == [[0.05, 0.0], [0.0, 0.05]]
+    assert any("-> support S2" in n and "held fixed" in n for n in conv.notes)
+    code, _, err = run_cli(["rig", "from-ross", str(tmp_path / "rotor.toml"), "--speed-rpm",
+                            str(rpm), "--zeta", "0", "-o", str(tmp_path / "rig.toml")], capsys)
+    assert code == 0, err
+    rig = load_rig(tmp_path / "rig.toml")
+    assert rig_difference(rig, conv.rig) is None
+    w = rpm * 2 * np.pi / 60
+    fm = full_model(rig, rpm)
+    ours = np.linalg.eigvals(fm.A - KP * fm.B @ fm.C)
+    ours = ours[ours.imag > 1.0]
+    ours = ours[np.argsort(np.abs(ours))][:12]
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        theirs = np.asarray(rotor.run_modal(speed=w, num_modes=60).evalues)
+    err = np.array([np.min(np.abs(theirs - v)) / abs(v) for v in ours])   # real parts too
+    # the rigid-body modes to 1e-9; above, both eigen-solvers on a cross-coupled (not
+    # symmetric) stiffness agree to 1e-7 - 2e-6 (to 2e-8 on the rotor without them)
+    assert np.max(err[:4]) < 1e-8 and np.max(err) < 1e-5, err
+    without = full_model(rig_from_ross(_rotor(), nominal_speed_rpm=rpm,
+                                       first_mode_zeta=0.0).rig, rpm)
+    lam0 = np.linalg.eigvals(without.A - KP * without.B @ without.C)
+    lam0 = lam0[lam0.imag > 1.0]
+    moved = np.abs(np.sort(np.abs(lam0))[:4] - np.sort(np.abs(ours))[:4])
+    assert np.min(moved) > 10.0                  # rad/s: the supports move the rigid modes
+
+
+def test_a_support_linked_to_a_pedestal_is_refused():
+    from bayes_amb.rig.ross import rig_from_ross
+
+    rotor = _rotor()
+    with contextlib.redirect_stdout(io.StringIO()), warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        rotor = rs.Rotor(rotor.shaft_elements, rotor.disk_elements,
+                         [*rotor.bearing_elements, rs.BearingElement(n=17, kxx=1e6,
+                                                                     cxx=100.0)])
+    journal = next(b for b in rotor.bearing_elements if b.n == 17)
+    journal.n_link = 36                       # as ROSS has it, with a pedestal node beyond
+    with pytest.raises(RigError, match=r"node 17: n_link 36: a support linked to another"):
+        rig_from_ross(rotor, nominal_speed_rpm=1.0)

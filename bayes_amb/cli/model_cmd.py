@@ -60,6 +60,7 @@ def model_summary(rig_path: str | None = None, speed_rpm: float | None = None) -
         "first_bending_rad_s": sv.first_bending_rad_s,
         "beta_s": fm.matrices.beta,
         "damping": damping_text(rig, fm.matrices.beta),
+        "supports": [s.to_dict() for s in rig.supports],
     }
 
 
@@ -84,6 +85,10 @@ def format_summary(d: dict) -> str:
                       for re, im in d["reduced_poles"])
     lines.append(f"  reduced poles : {poles} rad/s")
     lines.append(f"  damping       : {d['damping']}")
+    for s in d.get("supports", []):
+        coef = ", ".join(f"{k} {v:.4g}" for k, v in s.items() if k not in ("name", "node"))
+        lines.append(f"  support       : {s['name']} at node {s['node']} (fixed, not "
+                     f"identified; N/m, N s/m, kg): {coef}")
     return "\n".join(lines)
 
 

@@ -16,6 +16,7 @@ from typing import Any
 
 from bayes_amb.errors import RigError
 from bayes_amb.rig.shaft import Shaft, SteppedShaft, stepped_shaft_from_dict
+from bayes_amb.rig.supports import Support, supports_from_list
 from bayes_amb.tomlfile import read_toml
 
 CHANNELS: tuple[str, ...] = ("Ax", "Ay", "Bx", "By")
@@ -111,6 +112,9 @@ class Rig:
     limits: dict[str, float] = field(default_factory=dict)
     """What the hardware cannot exceed, from the optional [limits] table (LIMIT_KEYS):
     the linearity check fails on a record that reaches them."""
+    supports: tuple[Support, ...] = ()
+    """Fixed-coefficient supports besides the magnetic bearings (fluid-film bearings,
+    seals; the optional [[supports]], rig/supports.py)."""
 
     @property
     def n_nodes(self) -> int:
@@ -181,6 +185,7 @@ class Rig:
             "operation": {"nominal_speed_rpm": self.nominal_speed_rpm},
             "uncertainty": {"c_ref": self.c_ref, "k_ref": self.k_ref},
             **({"limits": dict(self.limits)} if self.limits else {}),
+            **({"supports": [s.to_dict() for s in self.supports]} if self.supports else {}),
         }
 
     def _bearings_dict(self) -> dict[str, Any]:
@@ -206,7 +211,7 @@ class Rig:
 SHIPPED_RIGS = ("reference", "small_rotor", "ross_test_rig")
 """Rig files shipped in bayes_amb/rig/data/, loadable by name."""
 _TOP_KEYS = {"name", "description", "shaft", "discs", "bearings", "sensors", "damping",
-             "operation", "uncertainty", "limits"}
+             "operation", "uncertainty", "limits", "supports"}
 _SHAFT_KEYS = {"youngs_modulus", "density", "poisson", "diameter", "length", "n_nodes"}
 _DISC_KEYS = {"name", "node", "mass", "ip", "id"}
 
@@ -346,13 +351,14 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     c_ref = r.number({"c_ref": 1000.0, **un}, "c_ref", "uncertainty.c_ref")
     k_ref = r.number({"k_ref": 1.0e5, **un}, "k_ref", "uncertainty.k_ref")
     limits = _limits(r, data.get("limits", {}))
+    supports = supports_from_list(data.get("supports", []), r, n_nodes)
     desc = data.get("description", "")
     if not isinstance(desc, str):
         raise r.fail("description", f"expected a string, got {desc!r}")
     return Rig(name=name, description=desc, shaft=shaft, discs=tuple(discs), magnets=magnets,
                bearing_nodes=bearing_nodes, sensor_nodes=sensor_nodes, first_mode_zeta=zeta,
                nominal_speed_rpm=speed, c_ref=c_ref, k_ref=k_ref, source=source,
-               limits=limits)
+               limits=limits, supports=supports)
 
 
 def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:

@@ -16,15 +16,18 @@ What maps, one to one (ROSS nodes are 0-based, rig nodes 1-based):
   current i0, pole area ag, turns nw and pole angle alpha, from which ki and ks follow
   (rig.magnet_constants; ROSS writes ks with its sign, the rig the magnitude). Each
   bearing's ``sensor_node`` gives ``[sensors]``.
+- any other ``BearingElement`` or ``SealElement`` (a fluid-film bearing, a seal) ->
+  ``[[supports]]`` (rig/supports.py): its lateral stiffness, damping and added-mass
+  coefficients as ROSS evaluates them at the nominal speed, held fixed.
 - ``rated_w`` (rad/s), when set, gives ``nominal_speed_rpm``.
 
 Refused with one line naming the element and field (the rig would silently differ): an
 axial force or torque on a shaft element, ``rotary_inertia=False`` or ``gyroscopic=False``
 (the rig always has both), Timoshenko on some elements and not others, a point mass with
-mx != my, damping set on the whole rotor (ROSS's global or modal damping), bearings or seals
-other than the two magnetic bearings. ROSS's own bearing controller (PID gains, transfer
-function) is not part of a rig and is noted: the controller is designed or imported
-separately (``bayes-amb controller``, ``bayes-amb import-controller``).
+mx != my, damping set on the whole rotor (ROSS's global or modal damping), a bearing or
+seal linked to another node (``n_link``: a pedestal). ROSS's own bearing controller (PID
+gains, transfer function) is not part of a rig and is noted: the controller is designed
+or imported separately (``bayes-amb controller``, ``bayes-amb import-controller``).
 """
 
 from __future__ import annotations
@@ -40,6 +43,8 @@ import warnings
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
+
+import numpy as np
 
 from bayes_amb.errors import RigError
 from bayes_amb.rig.rig import Rig, magnet_constants, rig_from_dict
@@ -123,10 +128,9 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
     discs = _discs(rotor, fail)
     mbs = magnetic_bearings(rotor)
     others = [b for b in rotor.bearing_elements if b not in mbs]
-    if len(mbs) != 2 or others:
+    if len(mbs) != 2:
         raise fail("bearing_elements", f"expected exactly 2 MagneticBearingElement, got "
-                   f"{len(mbs)} (and {len(others)} other bearings or seals, which a rig does "
-                   "not hold yet)")
+                   f"{len(mbs)}")
     bearings = {"A": _magnet_entry(mbs[0], fail), "B": _magnet_entry(mbs[1], fail)}
     if any(getattr(b, "n_link", None) is not None for b in mbs):
         notes.append("bearing links to support nodes (n_link) are ignored: rigid ground")
@@ -145,6 +149,8 @@ def rig_from_ross(rotor: Any, *, name: str = "from_ross", source: str = "<ross r
                for k, b in zip(("A", "B"), mbs, strict=True)}
     data: dict[str, Any] = {"name": name,
                             "description": f"converted from ROSS rotor {Path(source).name}"}
+    if others:
+        data["supports"] = _supports(others, speed, fail, notes)
     if uniform:
         shaft, zeta = _uniform_shaft(shafts, first_mode_zeta, notes)
         data |= {"shaft": shaft, "discs": discs, "bearings": bearings, "sensors": sensors,
@@ -280,6 +286,35 @@ def _discs(rotor: Any, fail: Any) -> list[dict[str, Any]]:
             discs.append({"name": f"P{i + 1}", "node": int(p.n) + 1, "mass": mx,
                           "ip": 0.0, "id": 0.0})
     return discs
+
+
+def _supports(elements: list[Any], speed_rpm: float, fail: Any, notes: list[str]
+              ) -> list[dict[str, Any]]:
+    """[[supports]] of the bearings and seals that are not magnetic (rig/supports.py): each
+    one's lateral stiffness, damping and added mass as ROSS evaluates them at the running
+    speed (BearingElement.K(frequency), C, M), held fixed."""
+    w = speed_rpm * 2.0 * math.pi / 60.0
+    out = []
+    for i, b in enumerate(sorted(elements, key=lambda e: e.n)):
+        what = f"bearing {getattr(b, 'tag', None) or i!r} at node {b.n}"
+        if getattr(b, "n_link", None) is not None:
+            raise fail(what, f"n_link {b.n_link}: a support linked to another node (a "
+                       "pedestal) has no rig equivalent; a rig's supports act on ground")
+        entry: dict[str, Any] = {"name": f"S{i + 1}", "node": int(b.n) + 1}
+        for p, method in (("k", "K"), ("c", "C"), ("m", "M")):
+            try:
+                mat = np.asarray(getattr(b, method)(w), dtype=float)[:2, :2]
+            except (TypeError, ValueError) as exc:
+                raise fail(what, f"its {method} at {w:.6g} rad/s: {exc}") from None
+            for a, (r, c) in zip(("xx", "xy", "yx", "yy"), ((0, 0), (0, 1), (1, 0), (1, 1)),
+                                 strict=True):
+                if mat[r, c] != 0.0:
+                    entry[f"{p}{a}"] = float(mat[r, c])
+        out.append(entry)
+        notes.append(f"{type(b).__name__} {getattr(b, 'tag', '') or ''} at node {b.n} -> "
+                     f"support {entry['name']}: its coefficients at {speed_rpm:g} rpm, held "
+                     "fixed (not identified)".replace("  ", " "))
+    return out
 
 
 def _magnet_entry(b: Any, fail: Any) -> dict[str, Any]:

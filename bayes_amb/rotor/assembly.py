@@ -43,7 +43,9 @@ class RotorMatrices:
     uniform shaft; the elements' Rayleigh damping alpha M_e + beta K_e plus beta*K_shaft on
     a stepped one), G gyroscopic per rad/s of spin (multiply by Omega), K_bearing = -ks on
     each bearing's DOFs, Bq (n_q, 4) maps currents to forces (each bearing's ki), Cq (4, n_q)
-    picks sensor displacements.
+    picks sensor displacements. A rig's fixed supports (fluid-film bearings, seals;
+    rig/supports.py) are in K_shaft, C and M at their nodes' x and y DOFs (the shaft's
+    damping beta is set from the bare shaft before).
     """
 
     M: NDArray
@@ -131,6 +133,11 @@ def assemble(rig: Rig) -> RotorMatrices:
         idx = slice(dof_index(d.node, "x"), dof_index(d.node, "x") + DOF_PER_NODE)
         M[idx, idx] += Md
         G[idx, idx] += Gd
+    for s in rig.supports:          # fluid-film bearings, seals: fixed, on x and y
+        xy = [dof_index(s.node, "x"), dof_index(s.node, "y")]
+        K[np.ix_(xy, xy)] += s.matrix("k")
+        C[np.ix_(xy, xy)] += s.matrix("c")
+        M[np.ix_(xy, xy)] += s.matrix("m")
     n_q = M.shape[0]
     K_b = np.zeros((n_q, n_q))
     b_dofs = channel_dofs(rig.bearing_nodes)
