@@ -207,3 +207,30 @@ def test_a_support_enters_the_plant_at_its_node_and_round_trips():
         d[xy] = 0.0
         assert not d.any()
     assert np.array_equal(seal.K_bearing, base.K_bearing) and seal.beta == base.beta
+
+
+def test_modal_damping_gives_every_free_free_bending_mode_its_ratio():
+    """[damping] modal_zeta: each flexible mode of the non-rotating shaft with its discs
+    (no bearings) has exactly that damping ratio, the rigid-body modes none; it excludes
+    first_mode_zeta and reads back from the rig's dict."""
+    import numpy as np
+
+    from bayes_amb.rotor.assembly import assemble
+
+    data = {**reference_dict(), "damping": {"modal_zeta": 0.012}}
+    rig = rig_from_dict(data, source="modal.toml")
+    assert (rig.modal_zeta, rig.first_mode_zeta) == (0.012, 0.0)
+    assert rig_from_dict(rig.to_dict(), source="modal.toml") == rig
+    m = assemble(rig)
+    n = m.n_q
+    A = np.block([[np.zeros((n, n)), np.eye(n)],
+                  [-np.linalg.solve(m.M, m.K_shaft), -np.linalg.solve(m.M, m.C)]])
+    lam = np.linalg.eigvals(A)
+    flexible = lam[np.abs(lam) > 1.0]
+    assert flexible.size == 2 * n - 8                  # 4 rigid modes x 2 per plane pair
+    assert np.allclose(-flexible.real / np.abs(flexible), 0.012, atol=1e-6)
+    with pytest.raises(RigError, match=r"field damping\.modal_zeta: give first_mode_zeta "):
+        rig_from_dict({**reference_dict(), "damping": {"modal_zeta": 0.01,
+                                                       "first_mode_zeta": 0.005}}, "x.toml")
+    with pytest.raises(RigError, match=r"field damping\.modal_zeta: expected a value below"):
+        rig_from_dict({**reference_dict(), "damping": {"modal_zeta": 1.5}}, "x.toml")

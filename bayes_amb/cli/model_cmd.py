@@ -15,6 +15,10 @@ from bayes_amb.rotor import bending_frequencies_hz, full_model, unstable_poles
 def damping_text(rig: Rig, beta: float) -> str:
     """The shaft's damping in words: 'C = beta*K_shaft, beta = 1.234e-06 s' (uniform), or
     the element table's Rayleigh damping."""
+    if rig.modal_zeta:
+        rest = "" if rig.shaft.uniform else "; plus each element's alpha M_e + beta K_e"
+        return (f"C = modal: zeta {rig.modal_zeta:g} on every free-free bending mode of the "
+                f"shaft and discs{rest}")
     if rig.shaft.uniform:
         return f"C = beta*K_shaft, beta = {beta:.3e} s"
     pairs = sorted({(e.alpha, e.beta) for e in rig.shaft.elements})

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from bayes_amb.errors import RigError
+from bayes_amb.rig.reader import FieldReader
 from bayes_amb.rig.shaft import Shaft, SteppedShaft, stepped_shaft_from_dict
 from bayes_amb.rig.supports import Support, supports_from_list
 from bayes_amb.tomlfile import read_toml
@@ -112,6 +113,9 @@ class Rig:
     limits: dict[str, float] = field(default_factory=dict)
     """What the hardware cannot exceed, from the optional [limits] table (LIMIT_KEYS):
     the linearity check fails on a record that reaches them."""
+    modal_zeta: float = 0.0
+    """Modal damping (the optional [damping] modal_zeta): this ratio on every free-free
+    bending mode of the shaft with its discs, non-rotating (rotor/assembly.py)."""
     supports: tuple[Support, ...] = ()
     """Fixed-coefficient supports besides the magnetic bearings (fluid-film bearings,
     seals; the optional [[supports]], rig/supports.py)."""
@@ -181,7 +185,8 @@ class Rig:
                        "id": d.id} for d in self.discs],
             "bearings": self._bearings_dict(),
             "sensors": {k: {"node": v} for k, v in self.sensor_nodes.items()},
-            "damping": {"first_mode_zeta": self.first_mode_zeta},
+            "damping": {"first_mode_zeta": self.first_mode_zeta,
+                        **({"modal_zeta": self.modal_zeta} if self.modal_zeta else {})},
             "operation": {"nominal_speed_rpm": self.nominal_speed_rpm},
             "uncertainty": {"c_ref": self.c_ref, "k_ref": self.k_ref},
             **({"limits": dict(self.limits)} if self.limits else {}),
@@ -216,66 +221,9 @@ _SHAFT_KEYS = {"youngs_modulus", "density", "poisson", "diameter", "length", "n_
 _DISC_KEYS = {"name", "node", "mass", "ip", "id"}
 
 
-class _Reader:
-    """Reads fields from a parsed rig table and raises RigError naming file and field."""
-
-    def __init__(self, source: str):
-        self.source = source
-
-    def fail(self, field: str, msg: str) -> RigError:
-        return RigError(f"rig file {self.source}: field {field}: {msg}")
-
-    def table(self, data: dict, key: str, field: str, allowed: set[str] | None = None) -> dict:
-        if key not in data:
-            raise self.fail(field, "missing")
-        t = data[key]
-        if not isinstance(t, dict):
-            raise self.fail(field, f"expected a table, got {t!r}")
-        if allowed is not None:
-            extra = sorted(set(t) - allowed)
-            if extra:
-                raise self.fail(f"{field}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
-        return t
-
-    def row(self, t: Any, field: str, allowed: set[str]) -> dict:
-        """An entry of an array of tables (or of a table of tables): a table of the allowed
-        keys."""
-        if not isinstance(t, dict):
-            raise self.fail(field, f"expected a table, got {t!r}")
-        extra = sorted(set(t) - allowed)
-        if extra:
-            raise self.fail(f"{field}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
-        return t
-
-    def number(self, t: dict, key: str, field: str, *, positive: bool = True,
-               nonneg: bool = False, upper: float | None = None) -> float:
-        if key not in t:
-            raise self.fail(field, "missing")
-        v = t[key]
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise self.fail(field, f"expected a finite number, got {v!r}")
-        if positive and not nonneg and v <= 0:
-            raise self.fail(field, f"expected a positive value, got {v!r}")
-        if nonneg and v < 0:
-            raise self.fail(field, f"expected a non-negative value, got {v!r}")
-        if upper is not None and v >= upper:
-            raise self.fail(field, f"expected a value below {upper}, got {v!r}")
-        return float(v)
-
-    def node(self, t: dict, key: str, field: str, n_nodes: int) -> int:
-        if key not in t:
-            raise self.fail(field, "missing")
-        v = t[key]
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise self.fail(field, f"expected an integer node number, got {v!r}")
-        if not 1 <= v <= n_nodes:
-            raise self.fail(field, f"node {v} out of range 1..{n_nodes}")
-        return v
-
-
 def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     """Build and validate a Rig from a rig-file dict; raises RigError naming the field."""
-    r = _Reader(source)
+    r = FieldReader(source)
     if not isinstance(data, dict):
         raise r.fail("<top>", f"expected a table, got {type(data).__name__}")
     extra = sorted(set(data) - _TOP_KEYS)
@@ -334,12 +282,7 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
                                  f"sensors.{b}.node", n_nodes)
     if bearing_nodes["A"] == bearing_nodes["B"]:
         raise r.fail("bearings.B.node", f"bearings A and B share node {bearing_nodes['A']}")
-    if isinstance(shaft, SteppedShaft) and "damping" not in data:
-        zeta = 0.0                     # the elements' own Rayleigh damping, nothing added
-    else:
-        dt_ = r.table(data, "damping", "damping", {"first_mode_zeta"})
-        zeta = r.number(dt_, "first_mode_zeta", "damping.first_mode_zeta", nonneg=True,
-                        upper=1.0)
+    zeta, modal = _damping(r, data, isinstance(shaft, SteppedShaft))
     op = r.table(data, "operation", "operation", {"nominal_speed_rpm"})
     speed = r.number(op, "nominal_speed_rpm", "operation.nominal_speed_rpm", nonneg=True)
     un = data.get("uncertainty", {"c_ref": 1000.0, "k_ref": 1.0e5})
@@ -358,7 +301,24 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
     return Rig(name=name, description=desc, shaft=shaft, discs=tuple(discs), magnets=magnets,
                bearing_nodes=bearing_nodes, sensor_nodes=sensor_nodes, first_mode_zeta=zeta,
                nominal_speed_rpm=speed, c_ref=c_ref, k_ref=k_ref, source=source,
-               limits=limits, supports=supports)
+               limits=limits, modal_zeta=modal, supports=supports)
+
+
+def _damping(r: Any, data: dict, stepped: bool) -> tuple[float, float]:
+    """[damping]: (first_mode_zeta, modal_zeta), one of them or neither (a stepped shaft's
+    elements carry their own Rayleigh damping, and the table may be left out)."""
+    if stepped and "damping" not in data:
+        return 0.0, 0.0
+    dt_ = r.table(data, "damping", "damping", {"first_mode_zeta", "modal_zeta"})
+    if "modal_zeta" not in dt_:
+        return r.number(dt_, "first_mode_zeta", "damping.first_mode_zeta", nonneg=True,
+                        upper=1.0), 0.0
+    modal = r.number(dt_, "modal_zeta", "damping.modal_zeta", nonneg=True, upper=1.0)
+    first = (r.number(dt_, "first_mode_zeta", "damping.first_mode_zeta", nonneg=True,
+                      upper=1.0) if "first_mode_zeta" in dt_ else 0.0)
+    if first and modal:
+        raise r.fail("damping.modal_zeta", "give first_mode_zeta or modal_zeta, not both")
+    return first, modal
 
 
 def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:

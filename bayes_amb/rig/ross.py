@@ -208,8 +208,10 @@ def _refuse_unmapped(shafts: list[Any], rotor: Any, fail: Any) -> None:
             raise fail(f"parameters.{key}", f"{v!r}: damping set on the whole rotor has no "
                        "rig equivalent (give it per shaft element, alpha and beta)")
     if getattr(rotor, "modal_damping_ratio", None) is not None:
-        raise fail("modal_damping_ratio", "modal damping of the whole rotor has no rig "
-                   "equivalent (give it per shaft element, alpha and beta)")
+        raise fail("modal_damping_ratio", "ROSS's modal damping is set on the modes of the "
+                   "rotor with its bearings, which a rig has no exact equivalent of: give "
+                   "the rig's [damping] modal_zeta (the free-free rotor's modes) or alpha "
+                   "and beta per shaft element")
 
 
 def _is_uniform(shafts: list[Any]) -> bool:

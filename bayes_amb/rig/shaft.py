@@ -169,7 +169,7 @@ MATERIAL_KEYS = {"youngs_modulus", "density", "poisson"}
 
 def stepped_shaft_from_dict(sh: dict[str, Any], r: Any) -> SteppedShaft:
     """The ``[shaft]`` table with ``elements`` (and ``materials``, ``shear``); ``r`` is the
-    rig file's reader (rig._Reader), which names file and field in every error."""
+    rig file's reader (rig.reader.FieldReader), which names file and field in every error."""
     allowed = {"elements", "materials", "shear"}
     bad = sorted(set(sh) - allowed)
     if bad:

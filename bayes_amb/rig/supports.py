@@ -83,8 +83,8 @@ def support_from_coefficients(name: str, node: int, values: dict[str, float]) ->
 
 
 def supports_from_list(raw: Any, reader: Any, n_nodes: int) -> tuple[Support, ...]:
-    """The [[supports]] of a rig file, each checked (reader: rig._Reader, whose errors name
-    the file and the field)."""
+    """The [[supports]] of a rig file, each checked (reader: a rig.reader.FieldReader, whose
+    errors name the file and the field)."""
     if not isinstance(raw, list):
         raise reader.fail("supports", f"expected an array of tables, got {raw!r}")
     out = []

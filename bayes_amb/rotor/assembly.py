@@ -114,6 +114,26 @@ def first_free_free_bending(M: NDArray, K: NDArray) -> float:
     return float(np.sqrt(flexible[0]))
 
 
+def modal_damping(M: NDArray, K: NDArray, zeta: float) -> NDArray:
+    """The damping matrix that gives every flexible mode of (M, K) the ratio zeta, and its
+    rigid-body modes none: C = M Phi diag(2 zeta w) Phi^T M, Phi the mass-normalised modes
+    (classical damping, so the modes stay (M, K)'s; ROSS's modal_damping_ratio builds its
+    C the same way, but from the rotor with its bearings).
+
+    >>> M, K = np.diag([2.0, 1.0]), np.array([[6.0, -2.0], [-2.0, 4.0]])
+    >>> C = modal_damping(M, K, 0.05)
+    >>> lam = np.linalg.eigvals(np.block([[np.zeros((2, 2)), np.eye(2)],
+    ...                                   [-np.linalg.solve(M, K), -np.linalg.solve(M, C)]]))
+    >>> bool(np.allclose(-lam.real / abs(lam), 0.05))
+    True
+    """
+    w2, phi = sla.eigh(K, M)
+    scale = max(abs(w2[-1]), 1.0)
+    w = np.where(w2 > 1e-9 * scale, np.sqrt(np.clip(w2, 0.0, None)), 0.0)
+    Mphi = M @ phi
+    return (Mphi * (2.0 * zeta * w)) @ Mphi.T
+
+
 def assemble(rig: Rig) -> RotorMatrices:
     """Assemble the global matrices of a rig (discs and bearings included).
 
@@ -133,6 +153,8 @@ def assemble(rig: Rig) -> RotorMatrices:
         idx = slice(dof_index(d.node, "x"), dof_index(d.node, "x") + DOF_PER_NODE)
         M[idx, idx] += Md
         G[idx, idx] += Gd
+    if rig.modal_zeta:
+        C = C + modal_damping(M, K, rig.modal_zeta)
     for s in rig.supports:          # fluid-film bearings, seals: fixed, on x and y
         xy = [dof_index(s.node, "x"), dof_index(s.node, "y")]
         K[np.ix_(xy, xy)] += s.matrix("k")
