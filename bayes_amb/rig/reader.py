@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
 from typing import Any
 
 from bayes_amb.errors import RigError
@@ -38,6 +39,26 @@ class FieldReader:
         if extra:
             raise self.fail(f"{field}.{extra[0]}", f"unknown key (allowed: {sorted(allowed)})")
         return t
+
+    def named_rows(self, raw: Any, key: str, allowed: set[str], prefix: str
+                   ) -> Iterator[tuple[str, dict, str]]:
+        """Each entry of an array of tables [[key]] as it is reached: its field name
+        ('key[i]'), the table (of the allowed keys) and its name (``name``, else prefix1,
+        prefix2, ...)."""
+        if not isinstance(raw, list):
+            raise self.fail(key, f"expected an array of tables, got {raw!r}")
+        for i, t in enumerate(raw):
+            f = f"{key}[{i}]"
+            self.row(t, f, allowed)
+            name = t.get("name", f"{prefix}{i + 1}")
+            if not isinstance(name, str) or not name:
+                raise self.fail(f"{f}.name", f"expected a non-empty string, got {name!r}")
+            yield f, t, name
+
+    def unique_names(self, names: list[str], key: str, noun: str) -> None:
+        """Raise where two entries of [[key]] share a name."""
+        if len(set(names)) != len(names):
+            raise self.fail(key, f"{noun} names must be unique")
 
     def number(self, t: dict, key: str, field: str, *, positive: bool = True,
                nonneg: bool = False, upper: float | None = None) -> float:

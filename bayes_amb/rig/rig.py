@@ -250,16 +250,8 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
             n_nodes=n_nodes,
         )
     n_nodes = shaft.n_nodes
-    discs_raw = data.get("discs", [])
-    if not isinstance(discs_raw, list):
-        raise r.fail("discs", f"expected an array of tables, got {discs_raw!r}")
     discs = []
-    for i, d in enumerate(discs_raw):
-        f = f"discs[{i}]"
-        r.row(d, f, _DISC_KEYS)
-        dname = d.get("name", f"D{i + 1}")
-        if not isinstance(dname, str) or not dname:
-            raise r.fail(f"{f}.name", f"expected a non-empty string, got {dname!r}")
+    for f, d, dname in r.named_rows(data.get("discs", []), "discs", _DISC_KEYS, "D"):
         discs.append(Disc(
             name=dname,
             node=r.node(d, "node", f"{f}.node", n_nodes),
@@ -267,8 +259,7 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
             ip=r.number(d, "ip", f"{f}.ip", nonneg=True),
             id=r.number(d, "id", f"{f}.id", nonneg=True),
         ))
-    if len({d.name for d in discs}) != len(discs):
-        raise r.fail("discs", "disc names must be unique")
+    r.unique_names([d.name for d in discs], "discs", "disc")
     bt = r.table(data, "bearings", "bearings", {"ki", "ks", "bias_current", "A", "B"})
     bearing_nodes = {}
     sensor_nodes = {}

@@ -48,6 +48,7 @@ import numpy as np
 
 from bayes_amb.errors import RigError
 from bayes_amb.rig.rig import Rig, magnet_constants, rig_from_dict
+from bayes_amb.rig.supports import nonzero_coefficients
 
 __all__ = ["RossConversion", "magnetic_bearings", "pid_gains", "rig_from_ross", "rig_to_toml"]
 
@@ -308,10 +309,7 @@ def _supports(elements: list[Any], speed_rpm: float, fail: Any, notes: list[str]
                 mat = np.asarray(getattr(b, method)(w), dtype=float)[:2, :2]
             except (TypeError, ValueError) as exc:
                 raise fail(what, f"its {method} at {w:.6g} rad/s: {exc}") from None
-            for a, (r, c) in zip(("xx", "xy", "yx", "yy"), ((0, 0), (0, 1), (1, 0), (1, 1)),
-                                 strict=True):
-                if mat[r, c] != 0.0:
-                    entry[f"{p}{a}"] = float(mat[r, c])
+            entry |= nonzero_coefficients(p, mat)
         out.append(entry)
         notes.append(f"{type(b).__name__} {getattr(b, 'tag', '') or ''} at node {b.n} -> "
                      f"support {entry['name']}: its coefficients at {speed_rpm:g} rpm, held "

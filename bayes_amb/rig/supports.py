@@ -61,12 +61,19 @@ class Support:
 
     def to_dict(self) -> dict[str, Any]:
         """The support as a rig file's [[supports]] entry (zero coefficients left out)."""
-        out: dict[str, Any] = {"name": self.name, "node": self.node}
-        for key in COEFFICIENTS:
-            v = getattr(self, key[0])[0 if key[1] == "x" else 1][0 if key[2] == "x" else 1]
-            if v:
-                out[key] = v
-        return out
+        return {"name": self.name, "node": self.node,
+                **{k: v for p in "kcm" for k, v in nonzero_coefficients(
+                    p, getattr(self, p)).items()}}
+
+
+def nonzero_coefficients(prefix: str, matrix: Any) -> dict[str, float]:
+    """A 2 x 2 block over (x, y) as its nonzero named coefficients.
+
+    >>> nonzero_coefficients("k", [[1e5, 0.0], [-2e4, 3e5]])
+    {'kxx': 100000.0, 'kyx': -20000.0, 'kyy': 300000.0}
+    """
+    return {f"{prefix}{a}{b}": float(matrix[i][j]) for i, a in enumerate("xy")
+            for j, b in enumerate("xy") if matrix[i][j] != 0.0}
 
 
 def support_from_coefficients(name: str, node: int, values: dict[str, float]) -> Support:
@@ -85,19 +92,11 @@ def support_from_coefficients(name: str, node: int, values: dict[str, float]) ->
 def supports_from_list(raw: Any, reader: Any, n_nodes: int) -> tuple[Support, ...]:
     """The [[supports]] of a rig file, each checked (reader: a rig.reader.FieldReader, whose
     errors name the file and the field)."""
-    if not isinstance(raw, list):
-        raise reader.fail("supports", f"expected an array of tables, got {raw!r}")
     out = []
-    for i, t in enumerate(raw):
-        f = f"supports[{i}]"
-        reader.row(t, f, _KEYS)
-        name = t.get("name", f"S{i + 1}")
-        if not isinstance(name, str) or not name:
-            raise reader.fail(f"{f}.name", f"expected a non-empty string, got {name!r}")
+    for f, t, name in reader.named_rows(raw, "supports", _KEYS, "S"):
         node = reader.node(t, "node", f"{f}.node", n_nodes)
         values = {k: reader.number(t, k, f"{f}.{k}", positive=False)
                   for k in COEFFICIENTS if k in t}
         out.append(support_from_coefficients(name, node, values))
-    if len({s.name for s in out}) != len(out):
-        raise reader.fail("supports", "support names must be unique")
+    reader.unique_names([s.name for s in out], "supports", "support")
     return tuple(out)

@@ -105,13 +105,16 @@ def _shaft_with_damping(rig: Rig) -> tuple[NDArray, NDArray, NDArray, NDArray]:
     return M, K, G, C
 
 
+def _flexible(w2: NDArray) -> NDArray:
+    """Which of the ascending squared natural frequencies w2 of an unsupported structure
+    are flexible modes (the rigid-body ones are zero to rounding)."""
+    return w2 > 1e-9 * max(abs(w2[-1]), 1.0)
+
+
 def first_free_free_bending(M: NDArray, K: NDArray) -> float:
     """First non-rigid natural frequency (rad/s) of an unsupported structure (M, K)."""
-    w2 = sla.eigh(K, M, eigvals_only=True)
-    w2 = np.sort(w2)
-    scale = max(abs(w2[-1]), 1.0)
-    flexible = w2[w2 > 1e-9 * scale]
-    return float(np.sqrt(flexible[0]))
+    w2 = np.sort(sla.eigh(K, M, eigvals_only=True))
+    return float(np.sqrt(w2[_flexible(w2)][0]))
 
 
 def modal_damping(M: NDArray, K: NDArray, zeta: float) -> NDArray:
@@ -128,8 +131,7 @@ def modal_damping(M: NDArray, K: NDArray, zeta: float) -> NDArray:
     True
     """
     w2, phi = sla.eigh(K, M)
-    scale = max(abs(w2[-1]), 1.0)
-    w = np.where(w2 > 1e-9 * scale, np.sqrt(np.clip(w2, 0.0, None)), 0.0)
+    w = np.where(_flexible(w2), np.sqrt(np.clip(w2, 0.0, None)), 0.0)
     Mphi = M @ phi
     return (Mphi * (2.0 * zeta * w)) @ Mphi.T
 
