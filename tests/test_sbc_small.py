@@ -15,15 +15,15 @@ and estimated by the sampler: their posterior is narrow (500 samples x 4 channel
 p(theta | y) is, to good accuracy, p(theta | y, sigma_true), for which the fixed sigma is an
 exact Bayesian model; the SBC statement holds for theta.
 
-Sampler budget: 16 walkers x 400 steps (about 15 tau), not run to 50 tau: SBC needs 99
-roughly independent draws (each walker thinned to one draw per tau, then 99 chosen at
-random; rank_draws refuses fewer), not converged summaries, and the walkers
-start at the Laplace approximation, so the burn-in (2 tau) is short. Measured wall time
-alone on 2 idle cores (Intel Xeon, 2026-11-29): 109 s at 400 steps (3.7 s per dataset with
-both noise models), 145 s at 600 steps, with the same verdicts (k_By coverage90 0.933 both,
-c_By 0.867 both; iid c_By coverage90 0.333 both); in the full suite, beside other tests,
-about twice that. The report (coverages, rank counts, p-values, wall time) is printed
-with ``pytest -s``.
+Sampler budget: 16 walkers x 300 steps, not run to 50 tau: SBC needs 99 roughly
+independent draws (each walker thinned to one draw per tau, then 99 chosen at random;
+rank_draws refuses fewer), not converged summaries, and the walkers start at the Laplace
+approximation, so the burn-in (2 tau) is short. Measured wall time alone on 2 idle cores
+(Intel Xeon, 2026-11-30): 72 s at 300 steps, 109 s at 400 and 145 s at 600 (2026-11-29),
+with the same verdicts (loop: k_By coverage90 0.933 at all three, c_By 0.900 at 300 and
+0.867 at 400 and 600; iid c_By coverage90 0.333 at all three); in the full suite, beside
+other tests, about twice that. The report (coverages, rank counts, p-values, wall time) is
+printed with ``pytest -s``.
 
 A slow variant (``-m slow``) runs 100 datasets with the loop model and also checks the mean
 rank (bias).
@@ -69,7 +69,7 @@ N_DATASETS = 30
 N_RANK = 99                          # L posterior draws per dataset; ranks in 0..99
 N_BINS = 5
 WALKERS = 16
-STEPS = 400
+STEPS = 300
 DT, DURATION = 1e-3, 0.5
 NOISE = {"noise_rms": 1e-7, "r1_rms": 1e-5, "r2_rms": 0.02}
 NOISE_MODELS = ("loop", "iid")
