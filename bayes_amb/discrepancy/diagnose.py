@@ -269,7 +269,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     (bayes_amb.api.diagnose also takes a list of recordings: records.diagnose_records).
 
     params: the bearing coefficients fitted in the nominal model (default: all eight, k_Ax
-    .. c_By); any left out is itself a candidate, tried before any physics.
+    .. c_By); any left out is itself a candidate, tried first and preferred to physics unless the
+    physics is stronger by the threshold (select._choose).
     """
     opt = options or DiagnoseOptions()
     t0 = time.perf_counter()

@@ -182,8 +182,8 @@ class Candidate:
 
     @property
     def nominal_family(self) -> bool:
-        """A parameter of the nominal model left out of the fit: tried before any physics
-        (diagnose.py, select.py)."""
+        """A parameter of the nominal model left out of the fit: tried first, and
+        preferred to physics unless the physics is stronger by the threshold (select.py)."""
         return self.entry.nominal_family
 
     @property

@@ -1,4 +1,4 @@
-"""A coefficient of the nominal model left out of the fit (tried before any physics)."""
+"""A coefficient of the nominal model left out of the fit (tried first; select._choose)."""
 
 from __future__ import annotations
 
@@ -22,7 +22,8 @@ BEARING_COEFFICIENTS = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", 
 class BearingCoefficient(Candidate):
     """A stiffness or damping coefficient of the nominal model that was left out of the fit
     (``location`` is its name, e.g. k_Ax): before any physics is blamed, the nominal model
-    with that coefficient freed is tried. Sampled: theta (null 0), the parameter's default
+    with that coefficient freed is tried, and preferred unless physics is stronger by the
+    threshold. Sampled: theta (null 0), the parameter's default
     prior, through its LFT column (eqs. 48-52)."""
 
     def params(self, ctx):

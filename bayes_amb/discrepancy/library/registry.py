@@ -39,7 +39,7 @@ REGISTRY: dict[str, EffectEntry] = {m.ENTRY.name: m.ENTRY for m in _MODULES}
 
 NOMINAL_FAMILY: dict[str, EffectEntry] = {bearing_coefficient.ENTRY.name:
                                           bearing_coefficient.ENTRY}
-"""Parameters of the nominal model tried as explanations before any physics."""
+"""Parameters of the nominal model tried as explanations first (select._choose)."""
 
 VOCABULARY: tuple[str, ...] = tuple(REGISTRY)
 """The public names of the physics effects."""
