@@ -124,3 +124,26 @@ def limited_threads[F: Callable[..., Any]](func: F) -> F:
                 limiter.restore_original_limits()
 
     return wrapper  # type: ignore[return-value]
+
+
+POOL_VAR = "BAYES_AMB_POOL"
+MAX_POOL = 8
+"""At most this many threads in the tool's own pools (:func:`pool_threads`)."""
+
+
+def pool_threads() -> int:
+    """Threads for the tool's own pools of independent, GIL-releasing work (LAPACK on
+    one posterior draw each, engineering/quantities.py): the CPUs this process may run
+    on, at most MAX_POOL; the count ``BAYES_AMB_POOL`` gives where it is set (0 or 1: no
+    pool); 1 where the BLAS libraries may use threads of their own (a
+    :func:`configured_threads` other than 1), which the pool would oversubscribe."""
+    value = os.environ.get(POOL_VAR, "").strip()
+    if value:
+        return max(parse_threads(value, POOL_VAR), 1)
+    if configured_threads() != 1:
+        return 1
+    try:
+        cpus = len(os.sched_getaffinity(0))
+    except (AttributeError, OSError):
+        cpus = os.cpu_count() or 1
+    return max(1, min(cpus, MAX_POOL))

@@ -146,6 +146,21 @@ def test_quantities_at_a_single_draw_are_the_model_values(rig, ctrl):
     assert q[f"minimum log dec @ {SPEED:.0f} rpm"].value == pytest.approx(min(ld))
 
 
+def test_the_pool_of_threads_gives_the_serial_answers_to_the_bit(rig, ctrl, monkeypatch):
+    """The points run in a pool of threads (threads.pool_threads): two threads and one give
+    the same quantities, value and interval, to the bit."""
+    rec = _empty_recording(rig, ctrl, 1e-3)
+    draws = Draws(("k_By", "c_Bx"), 0.05 * np.random.default_rng(3).standard_normal((12, 2)))
+    got = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("BAYES_AMB_POOL", n)
+        q = physical_quantities(draws, rec, [0.9 * SPEED, SPEED], model="reduced").quantities
+        got[n] = {k: (v.value, v.lo, v.hi) for k, v in q.items()}
+    assert got["1"].keys() == got["2"].keys()
+    for k, a in got["1"].items():
+        assert np.array_equal(a, got["2"][k], equal_nan=True), k
+
+
 def test_bad_speeds_are_rejected(rig, ctrl):
     rec = _empty_recording(rig, ctrl, 1e-3)
     with pytest.raises(BayesAmbError, match="speeds"):

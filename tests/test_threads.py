@@ -124,3 +124,30 @@ def test_the_cli_module_does_not_load_numpy_before_the_thread_limit():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          check=True)
     assert out.stdout.strip() == "False"
+
+
+@pytest.mark.parametrize("env,blas,expected", [
+    ({"BAYES_AMB_POOL": "3"}, "1", 3),
+    ({"BAYES_AMB_POOL": "0"}, "1", 1),
+    ({}, "0", 1),                 # BLAS keeps its own threads: no pool on top of them
+    ({}, "2", 1),
+])
+def test_pool_threads(monkeypatch, env, blas, expected):
+    from bayes_amb.threads import pool_threads
+
+    monkeypatch.delenv("BAYES_AMB_POOL", raising=False)
+    monkeypatch.setenv("BAYES_AMB_THREADS", blas)
+    for k, v in env.items():
+        monkeypatch.setenv(k, v)
+    assert pool_threads() == expected
+
+
+def test_pool_threads_follows_the_cpus_and_refuses_a_bad_count(monkeypatch):
+    from bayes_amb.threads import MAX_POOL, pool_threads
+
+    monkeypatch.delenv("BAYES_AMB_POOL", raising=False)
+    monkeypatch.setenv("BAYES_AMB_THREADS", "1")
+    assert pool_threads() == min(len(os.sched_getaffinity(0)), MAX_POOL)
+    monkeypatch.setenv("BAYES_AMB_POOL", "many")
+    with pytest.raises(BayesAmbError, match="BAYES_AMB_POOL"):
+        pool_threads()

@@ -18,6 +18,7 @@ back where it is). Then
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -69,17 +70,20 @@ def log_decrement(lam: NDArray) -> NDArray:
 
 
 _CACHE: dict[tuple, tuple[Rig, object]] = {}
+_CACHE_LOCK = threading.RLock()     # the points of quantities.py run in a pool of threads;
+                                    # reentrant: one entry's make() may need another's
 
 
 def _cached(rig: Rig, key: tuple, make):
     """Per-rig memo (rigs are not hashable; the rig object is kept with its entry)."""
     k = (id(rig), *key)
-    hit = _CACHE.get(k)
-    if hit is None or hit[0] is not rig:
-        if len(_CACHE) > 64:
-            _CACHE.clear()
-        hit = _CACHE[k] = (rig, make())
-    return hit[1]
+    with _CACHE_LOCK:
+        hit = _CACHE.get(k)
+        if hit is None or hit[0] is not rig:
+            if len(_CACHE) > 64:
+                _CACHE.clear()
+            hit = _CACHE[k] = (rig, make())
+        return hit[1]
 
 
 def _matrices(rig: Rig) -> RotorMatrices:

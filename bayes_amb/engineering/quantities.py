@@ -20,6 +20,7 @@ ks as identified, ks (1 - theta_k); "c" is the identified damping theta_c c_ref
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -40,7 +41,7 @@ from bayes_amb.io.recording import Recording
 from bayes_amb.results.engineering import EngineeringAnswers
 from bayes_amb.results.identification import Identification
 from bayes_amb.rig import CHANNELS
-from bayes_amb.threads import limited_threads
+from bayes_amb.threads import limited_threads, pool_threads
 from bayes_amb.uncertainty import get_spec, parse_param_list
 
 __all__ = ["API617_LOGDEC", "Draws", "EngineeringResult", "Quantity", "draws_from",
@@ -265,6 +266,20 @@ def _minimum(name: str, modes: list[Quantity], nominal: float) -> Quantity:
                     min(m.hi for m in ok), nominal, min(m.n_valid for m in ok))
 
 
+def _at_point(rig: Any, ctrl: Any, speed: float, theta: dict[str, float], model: str,
+              freq: NDArray | None) -> tuple[NDArray, NDArray | None, NDArray | None]:
+    """One plant's closed-loop modes at ``speed``, and where ``freq`` is given its
+    sensitivity there and the peaks. Independent of every other point: the points run in
+    a pool of threads (LAPACK releases the GIL; on ROSS's test rig, 452 closed-loop states,
+    two threads took 1.22 s where one took 2.15 s for 16 points, the same eigenvalues to
+    the bit)."""
+    lm = closed_loop_modes(rig, ctrl, speed, theta, model)
+    if freq is None:
+        return lm.lam, None, None
+    mag = lm.sensitivity_diag(freq)
+    return lm.lam, mag, _peaks(lm, freq, mag)
+
+
 def _sens_grid(rec: Recording, n_freq: int) -> NDArray:
     return np.logspace(0.0, np.log10(0.5 / rec.dt), n_freq)
 
@@ -337,18 +352,17 @@ def physical_quantities(source: Any, recording: Recording,
     lam_nom = np.full((speeds.size, len(MODE_LABELS)), np.nan + 0j)
     peaks = np.full((n_pts, 4), np.nan)
     sens = np.full((n_pts, base_f.size, 4), np.nan)
-    for j, s in enumerate(speeds):
-        nom = closed_loop_modes(rig, ctrl, s, {}, model)
-        lam_nom[j] = nom.lam
-        if j == i_run:
-            sens_nom = nom.sensitivity_diag(base_f)
-            peak_nom = _peaks(nom, base_f, sens_nom)
-        for i, th in enumerate(points.as_dicts()):
-            lm = closed_loop_modes(rig, ctrl, s, th, model)
-            lam[i, j] = lm.lam
+    thetas = [{}, *points.as_dicts()]              # the nominal plant, then the points
+    with ThreadPoolExecutor(pool_threads()) as pool:
+        for j, s in enumerate(speeds):
+            rows = list(pool.map(lambda th, s=s, j=j: _at_point(
+                rig, ctrl, s, th, model, base_f if j == i_run else None), thetas))
+            lam_nom[j] = rows[0][0]
+            lam[:, j] = [r[0] for r in rows[1:]]
             if j == i_run:
-                sens[i] = lm.sensitivity_diag(base_f)
-                peaks[i] = _peaks(lm, base_f, sens[i])
+                sens_nom, peak_nom = rows[0][1], rows[0][2]
+                sens[:] = [r[1] for r in rows[1:]]
+                peaks[:] = [r[2] for r in rows[1:]]
     q: dict[str, Quantity] = {}
 
     def _summarise(name: str, unit: str, group: str, values: NDArray, nominal: float,
