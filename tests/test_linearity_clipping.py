@@ -84,3 +84,40 @@ def test_a_record_of_milliseconds_fails_the_information_check(tmp_path, controll
     # the full record passes it
     checks, _, _ = nominal_assessment(rec, BEARING_COEFFICIENTS)
     assert next(c for c in checks.checks if c.name == "information").ok
+
+
+def _controller_check(rec):
+    from bayes_amb.discrepancy.adequacy import loop_poles
+    from bayes_amb.discrepancy.checks import run_checks
+    from bayes_amb.inference.forward import ForwardModel
+
+    fwd = ForwardModel(rec, BEARING_COEFFICIENTS)
+    return next(c for c in run_checks(rec, loop_poles(fwd)).checks if c.name == "controller")
+
+
+def test_a_recorded_coil_current_at_its_limit_is_not_a_wrong_controller(tmp_path,
+                                                                         controller_file):
+    """A DAQ that records the coil current records the amplifier's output: on the samples
+    held at the limit it is not the controller's command. With 4 % of the samples clipped
+    that difference followed the excitation, and the controller check failed the record
+    ('the controller that ran is not the one in the sidecar', current_limit_02 of
+    runs/nl58). Now the check passes, says why, and the clip is modelled (coil_defect);
+    the same record with a controller 2 % off still fails."""
+    rng = np.random.default_rng(58)
+    spec = draw_case("current_limit", rng, controller_file=controller_file, duration_s=1.0)
+    effect = spec.effects[0]
+    spec = replace(spec, effects=(replace(effect, params={
+        **effect.params, "recorded": "coil", "clipped_share_target": 0.04}),))
+    paths = write_case(spec, tmp_path, "coil4", rng)
+    rec, truth = load_recording(paths["csv"]), json.loads(paths["truth"].read_text())
+    ctrl = _controller_check(rec)
+    assert ctrl.ok and ctrl.values["limited_coil_current"], ctrl.line
+    assert "amplifier's output after its limit" in ctrl.line
+    checks, nominal, _ = nominal_assessment(rec, BEARING_COEFFICIENTS)
+    assert "controller" not in checks.failed
+    assert np.max(np.abs(_z(nominal, truth))) < 4.0     # the clip modelled, as above
+    k = rec.controller
+    wrong = replace(rec, controller=replace(k, C=np.asarray(k.C) * 1.02,
+                                            D=np.asarray(k.D) * 1.02))
+    bad = _controller_check(wrong)
+    assert not bad.ok and "FAILED" in bad.line

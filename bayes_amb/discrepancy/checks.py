@@ -40,6 +40,7 @@ from numpy.typing import NDArray
 from scipy.signal import detrend
 
 from bayes_amb.control.discrete import ss_response
+from bayes_amb.discrepancy.flat_tops import held_samples
 from bayes_amb.discrepancy.locate import _coherence
 from bayes_amb.io.recording import Recording, require_excitation
 from bayes_amb.rig import CHANNELS
@@ -194,15 +195,18 @@ class StartState:
         return not self.at_rest or self.rel_head <= 10 * CONTROLLER_TOL
 
 
-def start_state(rec: Recording, poles: NDArray) -> StartState:
+def start_state(rec: Recording, poles: NDArray, held: NDArray | None = None) -> StartState:
     """Does the record start at rest? (StartState; ``poles``: the loop's discrete poles,
     adequacy.loop_poles.) A controller started from rest on the recorded signals
     reproduces the recorded u only after the controller's initial state has died out, so a
     record that starts mid-operation shows a start-up difference. The diagnosis then uses
     the first samples as pre-history (run_checks), and identify fits the start transient
-    (IdentifyOptions.initial_state)."""
+    (IdentifyOptions.initial_state). ``held``: (N, 4) samples of a recorded coil current
+    held at the amplifier's limit, where the difference is the limit's, not the start's."""
     u = np.asarray(rec.u, dtype=float)
     d = u - recompute_u(rec)
+    if held is not None:           # a recorded coil current at the amplifier's limit
+        d = np.where(held, 0.0, d)
     n = u.shape[0]
     ctrl_poles = np.linalg.eigvals(np.asarray(rec.controller.A, dtype=float)) \
         if rec.controller.A.size else np.zeros(0)
@@ -231,7 +235,24 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
     x = np.concatenate(list(rec.excitation.values()), axis=1)[tail]
     share, p_adj = _coherent_share(d[tail], x, u[tail])
     ok = not (p_adj < 1e-3 and share > CONTROLLER_SHARE)
-    if ok:
+    held = held_samples(rec)
+    coil = False
+    if not ok and held.any():
+        # a DAQ that records the coil current records the amplifier's output: where the
+        # amplifier held it at its limit it is not the command, and nowhere else
+        share_o, p_o = _coherent_share(np.where(held, 0.0, d)[tail], x, u[tail])
+        coil = ok = not (p_o < 1e-3 and share_o > CONTROLLER_SHARE)
+        if coil:
+            share, p_adj = share_o, p_o
+            st = start_state(rec, poles, held)
+            rel_tail, rel_head = st.rel_tail, st.rel_head
+    if coil:
+        line = (f"controller: the recorded u is what the documented controller makes from the "
+                f"recorded y and excitation except where u is held at its extremes "
+                f"({100 * held.any(axis=1).mean():.2g} % of the samples; elsewhere a share "
+                f"{share:.1e} follows the excitation): the recorded current is the "
+                "amplifier's output after its limit, and the command is the controller's")
+    elif ok:
         line = (f"controller: the recorded u is what the documented controller makes from the "
                 f"recorded y and excitation (difference {rel_tail:.1e} of u, of which a share "
                 f"{share:.1e} follows the excitation)")
@@ -254,7 +275,8 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
                       f"controller's output by {100 * rel_tail:.2g} % throughout, which hides "
                       "a start-up difference; the record is taken as starting at rest")
     return (Check("controller", ok, line, {"relative_difference": rel_tail,
-                                           "excitation_share": share, "p_adjusted": p_adj}),
+                                           "excitation_share": share, "p_adjusted": p_adj,
+                                           "limited_coil_current": coil}),
             Check("start", True, start_line, {"at_rest": bool(at_rest),
                                               "start_difference": rel_head}),
             st.n_settle)

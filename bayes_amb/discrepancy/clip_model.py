@@ -20,14 +20,13 @@ import numpy as np
 from bayes_amb.discrepancy.checks import DataChecks, recompute_u
 from bayes_amb.discrepancy.current_loop import loop_screen
 from bayes_amb.discrepancy.fitting import FittedModel, fit_nominal
+from bayes_amb.discrepancy.flat_tops import held_samples
 from bayes_amb.discrepancy.linearity import (
     LIMIT_SD,
     Clipping,
     Regression,
-    at_extremes,
     clip_defect,
     clipping,
-    flat_top_channels,
     r2_response,
 )
 from bayes_amb.discrepancy.loop_model import model_loop
@@ -210,14 +209,8 @@ def coil_defect(recording: Recording, checks: DataChecks) -> np.ndarray | None:
     """The clip defect of a recorded coil current held at its extremes (flat tops in u_*):
     recorded minus commanded current on the held samples, zero elsewhere; None when no u
     channel is held or the controller check failed (the command is then not known)."""
-    held = [c for g, c, _ in flat_top_channels(recording) if g == "u"]
-    if not held or "controller" in checks.failed:
+    held = held_samples(recording)
+    if not held.any() or "controller" in checks.failed:
         return None
     u_rec = np.asarray(recording.u, dtype=float)
-    command = recompute_u(recording)
-    d = np.zeros_like(u_rec)
-    for c in held:
-        top, bottom = at_extremes(u_rec[:, c])
-        at = top | bottom
-        d[at, c] = (u_rec - command)[at, c]
-    return d
+    return np.where(held, u_rec - recompute_u(recording), 0.0)

@@ -44,13 +44,10 @@ from bayes_amb.control.discrete import ss_freqresp_modal, ss_response
 from bayes_amb.discrepancy.amplitude import amplitude_test
 from bayes_amb.discrepancy.checks import Check
 from bayes_amb.discrepancy.detection_lines import detection_line_test
+from bayes_amb.discrepancy.flat_tops import FLAT_SHARE, flat_top_channels
 from bayes_amb.discrepancy.locate import locate_bands
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import CHANNELS
-
-FLAT_SHARE = 1e-3
-"""A channel is clipped when at least this share of its samples (and 5) sit at one of its
-two extremes."""
 
 QUANTILES = (0.999, 0.997, 0.995, 0.99, 0.985, 0.98, 0.97, 0.96, 0.95, 0.93, 0.9)
 """Candidate limits: these quantiles of |u - median| (0.1 .. 10 % of the samples clip)."""
@@ -99,22 +96,6 @@ def flat_tops(rec: Recording) -> list[str]:
             for g, c, s in flat_top_channels(rec)]
 
 
-def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
-    """(group 'u' or 'y', channel index, share) of every channel held at an extreme."""
-    found = []
-    for g, v in (("u", rec.u), ("y", rec.y)):
-        v = np.asarray(v, dtype=float)
-        n = v.shape[0]
-        for c in range(len(CHANNELS)):
-            if np.ptp(v[:, c]) <= 0:
-                continue
-            top, bottom = at_extremes(v[:, c])
-            share = max(np.sum(top), np.sum(bottom)) / n
-            if share >= FLAT_SHARE and share * n >= 5:
-                found.append((g, c, float(share)))
-    return found
-
-
 LIMIT_REACHED = 0.995
 """A sample reaches a rig-file limit at this fraction of it (or beyond: a recorded command
 may exceed what the amplifier delivered)."""
@@ -143,13 +124,6 @@ def limit_hits(rec: Recording) -> list[str]:
                 found.append(f"{label} reaches {name} of the rig file ({lim[key]:g} {unit}, "
                              f"limits.{key}) on {100 * share:.2g} % of the samples")
     return found
-
-
-def at_extremes(x: NDArray) -> tuple[NDArray, NDArray]:
-    """Masks of the samples of x at its maximum and at its minimum (within 1e-9 of its
-    span)."""
-    tol = 1e-9 * float(np.ptp(x))
-    return x >= x.max() - tol, x <= x.min() + tol
 
 
 def _residualise(A: NDArray, bases: list[tuple[NDArray, NDArray]]) -> NDArray:
