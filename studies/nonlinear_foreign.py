@@ -74,6 +74,12 @@ def score(d: Any, truth: dict[str, Any]) -> dict[str, Any]:
         lo, hi = nl.hdi90["all"]
         row["slew"] = [s, nl.estimate["all"], lo, hi]
         row["slew_inside"] = bool(lo <= s <= hi)
+    if nl is not None and nl.name == "current_limit" and "current_limit" in eff \
+            and nl.hdi90.get("all"):
+        s = eff["current_limit"]["i_max_a"]
+        lo, hi = nl.hdi90["all"]
+        row["limit"] = [s, nl.estimate["all"], lo, hi]
+        row["limit_inside"] = bool(lo <= s <= hi)
     if nl is not None and nl.name == "amp_current_loop" and "amp_voltage_limit" in eff:
         t = eff["amp_voltage_limit"]
         row["loop"] = {k: [t[k], nl.estimate[key], *nl.hdi90[key]] for k, key in
@@ -195,7 +201,8 @@ def main() -> None:
                 f.write(json.dumps(row) + "\n")
             print(json.dumps({k2: row[k2] for k2 in ("name", "verdict", "modelled",
                                                       "n_inside", "time_s")}
-                             | {k2: row[k2] for k2 in ("gap", "slew", "loop") if k2 in row}),
+                             | {k2: row[k2] for k2 in ("gap", "slew", "loop", "limit")
+                                if k2 in row}),
                   flush=True)
 
 

@@ -121,3 +121,21 @@ def test_a_recorded_coil_current_at_its_limit_is_not_a_wrong_controller(tmp_path
                                             D=np.asarray(k.D) * 1.02))
     bad = _controller_check(wrong)
     assert not bad.ok and "FAILED" in bad.line
+
+
+def test_the_limit_is_read_off_the_flat_tops_of_a_coil_current():
+    """Half the span between a held channel's two flat tops is the limit about the
+    amplifier's own centre, whatever offset the amplifier or the DAQ adds; a channel held
+    at one end only gives that end's distance from its median."""
+    from bayes_amb.discrepancy.flat_tops import held_half_spans
+
+    rng = np.random.default_rng(4)
+    cmd = 0.4 * rng.standard_normal((4000, 4))
+    amp_offset = np.array([0.02, -0.03, 0.0, 0.01])
+    daq_offset = np.array([0.011, 0.0, -0.02, 0.0])
+    coil = np.clip(cmd + amp_offset, -0.5, 0.5) + daq_offset
+    coil[:, 3] = np.minimum(cmd[:, 3], 0.6)          # held at the top only
+    spans = held_half_spans(coil)
+    assert np.allclose(spans[:3], 0.5, rtol=0, atol=1e-12)
+    assert spans[3] == pytest.approx(0.6 - np.median(coil[:, 3]))
+    assert held_half_spans(cmd) == []                # nothing held

@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
+from bayes_amb.discrepancy.flat_tops import at_extremes, held_half_spans
 from bayes_amb.discrepancy.linearity import LIMIT_SD
 from bayes_amb.discrepancy.nonlinear import (
     FORCE_LAW,
@@ -25,10 +26,13 @@ UNITS = {"gap_m": "m", "slew_a_per_s": "A/s", "limit_a": "A"}
 
 
 def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
-                       coefficients: dict[str, dict[str, Any]]) -> dict[str, Any] | None:
+                       coefficients: dict[str, dict[str, Any]],
+                       recorded_u: NDArray | None = None) -> dict[str, Any] | None:
     """The diagnosis' nonlinearity block from the linearity check's values (None when no
     nonlinearity was modelled): the parameter per location with its 90 % interval and the
-    amplitude answer. coefficients: the reported bearing coefficients (theta summaries)."""
+    amplitude answer. coefficients: the reported bearing coefficients (theta summaries);
+    recorded_u: the currents as recorded (a coil current's flat tops, before the offsets
+    check's detrending tilts them; default u)."""
     modelled = values.get("modelled")
     if modelled is None:
         return None
@@ -46,10 +50,32 @@ def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
                  "hdi90": {"all": [lim * (1 - 1.645 * LIMIT_SD), lim * (1 + 1.645 * LIMIT_SD)]},
                  "z": values.get("clipping_z", 0.0)}
     else:                                           # a recorded coil current held at a limit
-        return {"name": "current_limit", "title": TITLES["current_limit"], "where": ["all"],
-                "parameter": "", "unit": "", "estimate": {}, "hdi90": {}, "z": 0.0,
-                "linear_range": "the coil current is held at the amplifier limit on the "
-                                "flat tops of the record: keep the excitation below it"}
+        raw = np.asarray(u if recorded_u is None else recorded_u, dtype=float)
+        spans = held_half_spans(raw)
+        if not spans:
+            return {"name": "current_limit", "title": TITLES["current_limit"],
+                    "where": ["all"], "parameter": "", "unit": "", "estimate": {},
+                    "hdi90": {}, "z": 0.0,
+                    "linear_range": "the coil current is held at the amplifier limit on the "
+                                    "flat tops of the record: keep the excitation below it"}
+        # read off the flat tops: their channels' spread, and the 1 % the offsets and
+        # noise before the limit leave (LIMIT_SD)
+        lim = float(np.median(spans))
+        block = {"name": "current_limit", "title": TITLES["current_limit"],
+                 "where": ["all"], "parameter": "limit_a", "unit": "A",
+                 "estimate": {"all": lim},
+                 "hdi90": {"all": [min(spans) - 1.645 * LIMIT_SD * lim,
+                                   max(spans) + 1.645 * LIMIT_SD * lim]},
+                 "z": 0.0}
+        held = [t | b for t, b in map(at_extremes, raw.T) if max(t.sum(), b.sum()) >= 5]
+        share = float(np.mean([np.mean(h) for h in held])) if held else 0.0
+        block["linear_range"] = (
+            f"the amplifier delivers at most {lim:.3g} A about its centre (read off the "
+            f"flat tops of the recorded coil current); this record holds it there on "
+            f"{100 * share:.2g} % of the samples: scale the excitation so that the current "
+            "stays below it")
+        block["derived"] = {"limited_share": share}
+        return block
     block["linear_range"], block["derived"] = _amplitude_answer(block, rig, u, dt,
                                                                  coefficients)
     return block

@@ -274,9 +274,9 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
         start_line = (f"start: cannot be told - the recorded u differs from the documented "
                       f"controller's output by {100 * rel_tail:.2g} % throughout, which hides "
                       "a start-up difference; the record is taken as starting at rest")
-    return (Check("controller", ok, line, {"relative_difference": rel_tail,
-                                           "excitation_share": share, "p_adjusted": p_adj,
-                                           "limited_coil_current": coil}),
+    values = {"relative_difference": rel_tail, "excitation_share": share,
+              "p_adjusted": p_adj, **({"limited_coil_current": True} if coil else {})}
+    return (Check("controller", ok, line, values),
             Check("start", True, start_line, {"at_rest": bool(at_rest),
                                               "start_difference": rel_head}),
             st.n_settle)

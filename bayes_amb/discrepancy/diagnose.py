@@ -392,7 +392,8 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "direct_terms": direct,
         "nonlinearity": nonlinearity_block(
             next(c for c in checks.checks if c.name == "linearity").values,
-            recording.rig, checks.u, recording.dt, theta_summary(reported, s_coef)),
+            recording.rig, checks.u, recording.dt, theta_summary(reported, s_coef),
+            recording.u),
         "model_error": {"before": _model_error_dict(nominal),
                         "after": _model_error_dict(reported)},
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "

@@ -50,3 +50,25 @@ def held_samples(rec: Recording) -> NDArray:
             top, bottom = at_extremes(u[:, c])
             held[:, c] = top | bottom
     return held
+
+
+def held_half_spans(u: NDArray) -> list[float]:
+    """The amplifier's limit as the recorded coil currents show it: per u channel held at
+    both extremes, half the distance between them (the limit about the amplifier's own
+    centre, whatever offset the amplifier or the DAQ adds); per channel held at one
+    extreme only, that extreme's distance from the channel's median. Empty where no
+    channel is held."""
+    u = np.asarray(u, dtype=float)
+    n = u.shape[0]
+    out = []
+    for c in range(u.shape[1]):
+        if np.ptp(u[:, c]) <= 0:
+            continue
+        top, bottom = at_extremes(u[:, c])
+        held = [m.sum() >= max(FLAT_SHARE * n, 5) for m in (top, bottom)]
+        if all(held):
+            out.append(0.5 * float(np.ptp(u[:, c])))
+        elif any(held):
+            end = u[:, c].max() if held[0] else u[:, c].min()
+            out.append(abs(float(end - np.median(u[:, c]))))
+    return out

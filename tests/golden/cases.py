@@ -21,7 +21,10 @@ HERE = Path(__file__).parent
 SEED = 11
 DURATION_S = 1.0
 
-# (kind, index): a record of every verdict, in-library effects at both ends of the loop,
+# (kind, index): the verdicts explained, partly explained, no mismatch and nonlinear
+# (current_limit_02: a recorded coil current at the amplifier's limit, 'data check failed'
+# until the controller check learnt to tell it from a wrong controller), in-library
+# effects at both ends of the loop,
 # a stand-in-prone family, a held-out one and the full-order truth
 DIAGNOSED = (("current_limit", 2), ("control", 6), ("control_force", 7), ("seal", 7),
              ("eddy_current", 6), ("actuator_gain", 0), ("sensor_gain", 1),
