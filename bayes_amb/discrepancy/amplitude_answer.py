@@ -50,34 +50,37 @@ def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
                  "hdi90": {"all": [lim * (1 - 1.645 * LIMIT_SD), lim * (1 + 1.645 * LIMIT_SD)]},
                  "z": values.get("clipping_z", 0.0)}
     else:                                           # a recorded coil current held at a limit
-        raw = np.asarray(u if recorded_u is None else recorded_u, dtype=float)
-        spans = held_half_spans(raw)
-        if not spans:
-            return {"name": "current_limit", "title": TITLES["current_limit"],
-                    "where": ["all"], "parameter": "", "unit": "", "estimate": {},
-                    "hdi90": {}, "z": 0.0,
-                    "linear_range": "the coil current is held at the amplifier limit on the "
-                                    "flat tops of the record: keep the excitation below it"}
-        # read off the flat tops: their channels' spread, and the 1 % the offsets and
-        # noise before the limit leave (LIMIT_SD)
-        lim = float(np.median(spans))
-        block = {"name": "current_limit", "title": TITLES["current_limit"],
-                 "where": ["all"], "parameter": "limit_a", "unit": "A",
-                 "estimate": {"all": lim},
-                 "hdi90": {"all": [min(spans) - 1.645 * LIMIT_SD * lim,
-                                   max(spans) + 1.645 * LIMIT_SD * lim]},
-                 "z": 0.0}
-        held = [t | b for t, b in map(at_extremes, raw.T) if max(t.sum(), b.sum()) >= 5]
-        share = float(np.mean([np.mean(h) for h in held])) if held else 0.0
-        block["linear_range"] = (
-            f"the amplifier delivers at most {lim:.3g} A about its centre (read off the "
-            f"flat tops of the recorded coil current); this record holds it there on "
-            f"{100 * share:.2g} % of the samples: scale the excitation so that the current "
-            "stays below it")
-        block["derived"] = {"limited_share": share}
-        return block
+        return _coil_limit(np.asarray(u if recorded_u is None else recorded_u, dtype=float))
     block["linear_range"], block["derived"] = _amplitude_answer(block, rig, u, dt,
                                                                  coefficients)
+    return block
+
+
+def _coil_limit(raw: NDArray) -> dict[str, Any]:
+    """The current limit's block from a recorded coil current's flat tops (raw: the
+    currents as recorded): the limit read off them (flat_tops.held_half_spans), its 90 %
+    interval their channels' spread and the 1 % (LIMIT_SD) the offsets and noise before
+    the limit leave, and the share of samples held there."""
+    block: dict[str, Any] = {"name": "current_limit", "title": TITLES["current_limit"],
+                             "where": ["all"], "parameter": "", "unit": "", "estimate": {},
+                             "hdi90": {}, "z": 0.0}
+    spans = held_half_spans(raw)
+    if not spans:
+        block["linear_range"] = ("the coil current is held at the amplifier limit on the "
+                                 "flat tops of the record: keep the excitation below it")
+        return block
+    lim = float(np.median(spans))
+    held = [t | b for t, b in map(at_extremes, raw.T) if max(t.sum(), b.sum()) >= 5]
+    share = float(np.mean([np.mean(h) for h in held])) if held else 0.0
+    block.update(
+        parameter="limit_a", unit="A", estimate={"all": lim},
+        hdi90={"all": [min(spans) - 1.645 * LIMIT_SD * lim,
+                       max(spans) + 1.645 * LIMIT_SD * lim]},
+        linear_range=(f"the amplifier delivers at most {lim:.3g} A about its centre (read "
+                      "off the flat tops of the recorded coil current); this record holds it "
+                      f"there on {100 * share:.2g} % of the samples: scale the excitation so "
+                      "that the current stays below it"),
+        derived={"limited_share": share})
     return block
 
 
