@@ -191,3 +191,15 @@ def test_transient_benchmark_fits_the_start_by_default():
     assert set(t["sd_ratio"]) == {"k_By", "c_By"} and max(t["sd_ratio"].values()) < 1
     text = format_text(doc)
     assert "start transient fitted" in text and "sd fitted / as noise" in text
+
+
+def test_answers_benchmark_gives_the_same_answers_on_both_sides():
+    """`bench --only answers` (quick): one thread and the pool give the same engineering
+    answers on both rigs, and each side's time is a real time."""
+    from bayes_amb.bench.answers_case import bench_answers
+
+    r = bench_answers(quick=True)
+    for row in (r.reference, r.test_rig):
+        assert row.identical, row.rig
+        assert row.serial_s > 0 and row.pool_s > 0 and row.pool_threads >= 1
+        assert row.speedup == pytest.approx(row.serial_s / row.pool_s)

@@ -362,11 +362,19 @@ def bench_rigs(quick: bool = False) -> Result:
     return run(quick)
 
 
+def bench_answers(quick: bool = False) -> Result:
+    """The engineering answers with one thread against the pool of threads, on both rigs
+    (bayes_amb.bench.answers_case)."""
+    from bayes_amb.bench.answers_case import bench_answers as run
+
+    return run(quick)
+
+
 BENCHMARKS: dict[str, Callable[..., Result]] = {
     "likelihood": bench_likelihood, "posterior": bench_posterior,
     "simulate": bench_simulate, "map": bench_map, "diagnose": bench_diagnose,
     "cli": bench_cli, "study": bench_study, "plan": bench_plan,
-    "transient": bench_transient, "rigs": bench_rigs}
+    "transient": bench_transient, "rigs": bench_rigs, "answers": bench_answers}
 
 DEFAULT_BENCHMARKS = ("likelihood", "posterior", "simulate", "map")
 """What ``bayes-amb bench`` runs without --only (the diagnosis, the CLI runs and the study

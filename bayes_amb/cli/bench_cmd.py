@@ -21,8 +21,9 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                        "OPENBLAS_NUM_THREADS=1) about 2; '--only study' (1000-replicate study "
                        "throughput) about 5; '--only plan' (the plan against one identification) "
                        "under 1; '--only rigs' (ROSS's test rig against the reference rig, "
-                       "the same case) about 4. BLAS threads are limited by the tool itself "
-                       "(--threads, BAYES_AMB_THREADS).")
+                       "the same case) about 4; '--only answers' (the engineering answers, "
+                       "one thread against the pool) about 2. BLAS threads are limited by "
+                       "the tool itself (--threads, BAYES_AMB_THREADS).")
     p.add_argument("--only", default=None, metavar="NAME,...",
                    help="comma-separated benchmarks to run, of " + ", ".join(BENCHMARKS)
                    + " (default: all but cli, study)")
@@ -104,6 +105,10 @@ def _rows(d: dict[str, Any]) -> list[tuple[str, str, str, str]]:
                      f"reference rig: {r['reference']['diagnose_s']:.0f} s, "
                      f"{r['reference']['states']} states",
                      f"{1 / r['ratios']['diagnose_s']:.2f}x"))
+    if "answers" in d:
+        r = d["answers"]["test_rig"]
+        rows.append(("answers", f"test rig: {r['pool_s']:.1f} s on {r['pool_threads']} "
+                     "threads", f"{r['serial_s']:.1f} s on one", f"{r['speedup']:.2f}x"))
     if "study" in d:
         r = d["study"]
         rows.append(("study", f"{r['n_replicates']} replicates in {r['wall_s']:.0f} s "
@@ -196,6 +201,15 @@ def _details(d: dict[str, Any]) -> list[str]:
             out.append(f"  {s['rig']}: {s['states']} states, valid to {s['validity_hz']:.0f}"
                        f" Hz; covered 8 coefficients: identify {s['covered_identify']}/8, "
                        f"diagnose {s['covered_diagnose']}/8 ({s['verdict']})")
+    if "answers" in d:
+        out.append("answers: the engineering answers (full FE model, posterior draws at "
+                   "every speed), one thread against the pool:")
+        for side in ("test_rig", "reference"):
+            a = d["answers"][side]
+            out.append(f"  {a['rig']}: {a['draws']} draws x {a['speeds']} speeds, "
+                       f"{a['serial_s']:.1f} s on one thread, {a['pool_s']:.1f} s on "
+                       f"{a['pool_threads']} ({a['speedup']:.2f}x); the same answers: "
+                       f"{a['identical']}")
     if "cli" in d:
         r = d["cli"]
         out.append(f"cli: `{r['command']}`, {r['repeats']} runs per environment, interleaved;"
