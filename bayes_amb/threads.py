@@ -133,7 +133,7 @@ MAX_POOL = 8
 
 def pool_threads() -> int:
     """Threads for the tool's own pools of independent, GIL-releasing work (LAPACK on
-    one posterior draw each, engineering/quantities.py): the CPUs this process may run
+    one posterior draw each: engineering/quantities.py and frf.py): the CPUs this process may run
     on, at most MAX_POOL; the count ``BAYES_AMB_POOL`` gives where it is set (0 or 1: no
     pool); 1 where the BLAS libraries may use threads of their own (a
     :func:`configured_threads` other than 1), which the pool would oversubscribe."""

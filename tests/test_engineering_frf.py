@@ -108,3 +108,19 @@ def test_response_snr_is_infinite_without_noise_and_follows_the_noise_level(setu
     snr = response_snr_db(noisy, {"k_By": 0.3}, "reduced")
     np.testing.assert_allclose(snr, 10 * np.log10(p_x / rest), atol=1e-6)
     assert np.all(rest > sigma**2)
+
+
+def test_the_pool_of_threads_gives_the_serial_bands_to_the_bit(setup, monkeypatch):
+    """The draws run in a pool of threads (threads.pool_threads): one thread and two give
+    the same bands to the bit."""
+    rig, ctrl, _ = setup
+    rec, _ = simulate_recording(rig, ctrl, SimulationConfig(
+        truth="reduced", params={"k_By": 0.3}, dt=DT, duration=0.5, noise_rms=1e-7, seed=5))
+    draws = Draws(("k_By", "c_By"), [[0.3, 0.0], [0.25, 0.1], [0.35, -0.1], [0.3, 0.05]])
+    got = {}
+    for n in ("1", "2"):
+        monkeypatch.setenv("BAYES_AMB_POOL", n)
+        r = frequency_responses(draws, rec, model="reduced", nperseg=128)
+        got[n] = (r.plant_band, r.compliance_band, r.plant_nominal)
+    for a, b in zip(got["1"], got["2"], strict=True):
+        np.testing.assert_array_equal(a, b)
