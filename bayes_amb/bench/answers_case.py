@@ -15,6 +15,7 @@ from __future__ import annotations
 import os
 import time
 from dataclasses import dataclass
+from unittest.mock import patch
 
 import numpy as np
 
@@ -56,30 +57,21 @@ def _row(rig_name: str, quick: bool) -> AnswersRow:
     centre = np.array([TRUTH.get(k, 0.0) for k in NAMES])
     draws = Draws(NAMES, centre + 0.02 * np.random.default_rng(1).standard_normal((n, 8)))
     speeds = [rec.speed_rpm] if quick else None
-    times, got = {}, {}
-    before = os.environ.get("BAYES_AMB_POOL")
-    try:
-        for side in ("1", before):
-            if side is None:
-                os.environ.pop("BAYES_AMB_POOL", None)
-            else:
-                os.environ["BAYES_AMB_POOL"] = side
-            t0 = time.perf_counter()
-            res = physical_quantities(draws, rec, speeds, n_draws=n)
-            times[side == "1"] = time.perf_counter() - t0
-            got[side == "1"] = {k: (q.value, q.lo, q.hi) for k, q in res.quantities.items()}
-            threads = pool_threads()
-    finally:
-        if before is None:
-            os.environ.pop("BAYES_AMB_POOL", None)
-        else:
-            os.environ["BAYES_AMB_POOL"] = before
-    same = got[True].keys() == got[False].keys() and all(
-        np.array_equal(got[True][k], got[False][k], equal_nan=True) for k in got[True])
-    n_speeds = 1 if quick else 4
-    return AnswersRow(rig=rig_name, serial_s=times[True], pool_s=times[False],
-                      speedup=times[True] / times[False], pool_threads=threads,
-                      draws=n, speeds=n_speeds, identical=bool(same))
+
+    def timed() -> tuple[float, dict]:
+        t0 = time.perf_counter()
+        res = physical_quantities(draws, rec, speeds, n_draws=n)
+        return time.perf_counter() - t0, {k: (q.value, q.lo, q.hi)
+                                          for k, q in res.quantities.items()}
+
+    with patch.dict(os.environ, {"BAYES_AMB_POOL": "1"}):     # the baseline: one thread
+        serial_s, serial = timed()
+    pool_s, pooled = timed()                                   # the user's pool
+    same = serial.keys() == pooled.keys() and all(
+        np.array_equal(serial[k], pooled[k], equal_nan=True) for k in serial)
+    return AnswersRow(rig=rig_name, serial_s=serial_s, pool_s=pool_s,
+                      speedup=serial_s / pool_s, pool_threads=pool_threads(),
+                      draws=n, speeds=1 if quick else 4, identical=bool(same))
 
 
 def bench_answers(quick: bool = False) -> AnswersBench:

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-from bayes_amb.discrepancy.flat_tops import at_extremes, held_half_spans
+from bayes_amb.discrepancy.flat_tops import held_half_spans, held_mask
 from bayes_amb.discrepancy.linearity import LIMIT_SD
 from bayes_amb.discrepancy.nonlinear import (
     FORCE_LAW,
@@ -70,8 +70,8 @@ def _coil_limit(raw: NDArray) -> dict[str, Any]:
                                  "flat tops of the record: keep the excitation below it")
         return block
     lim = float(np.median(spans))
-    held = [t | b for t, b in map(at_extremes, raw.T) if max(t.sum(), b.sum()) >= 5]
-    share = float(np.mean([np.mean(h) for h in held])) if held else 0.0
+    held = held_mask(raw)
+    share = float(held[:, held.any(axis=0)].mean())
     block.update(
         parameter="limit_a", unit="A", estimate={"all": lim},
         hdi90={"all": [min(spans) - 1.645 * LIMIT_SD * lim,

@@ -32,7 +32,7 @@ pole of the nominal loop (decay to 1e-3).
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -194,29 +194,44 @@ class StartState:
         poles, run alone, lets rounding grow in the tail)."""
         return not self.at_rest or self.rel_head <= 10 * CONTROLLER_TOL
 
+    def without(self, held: NDArray) -> StartState:
+        """The same with d zero on ``held`` ((N, 4) samples of a recorded coil current held
+        at the amplifier's limit, where the difference is the limit's, not the start's)."""
+        d = np.where(held, 0.0, self.d)
+        return replace(self, d=d, **_relative(self.u, d, self.tail))
 
-def start_state(rec: Recording, poles: NDArray, held: NDArray | None = None) -> StartState:
+
+def _relative(u: NDArray, d: NDArray, tail: slice) -> dict[str, float]:
+    """rel_tail, rel_head of StartState: d's RMS after the start-up and in the first
+    samples, relative to u's RMS after it."""
+    n = u.shape[0]
+    scale = float(np.sqrt(np.mean((u[tail] - u[tail].mean(axis=0)) ** 2))) or 1.0
+    head = slice(0, max(1, min(20, n // 50)))
+    return {"rel_tail": float(np.sqrt(np.mean(d[tail] ** 2)) / scale),
+            "rel_head": float(np.sqrt(np.mean(d[head] ** 2)) / scale)}
+
+
+def start_state(rec: Recording, poles: NDArray) -> StartState:
     """Does the record start at rest? (StartState; ``poles``: the loop's discrete poles,
     adequacy.loop_poles.) A controller started from rest on the recorded signals
     reproduces the recorded u only after the controller's initial state has died out, so a
     record that starts mid-operation shows a start-up difference. The diagnosis then uses
     the first samples as pre-history (run_checks), and identify fits the start transient
-    (IdentifyOptions.initial_state). ``held``: (N, 4) samples of a recorded coil current
-    held at the amplifier's limit, where the difference is the limit's, not the start's."""
+    (IdentifyOptions.initial_state)."""
     u = np.asarray(rec.u, dtype=float)
     d = u - recompute_u(rec)
-    if held is not None:           # a recorded coil current at the amplifier's limit
-        d = np.where(held, 0.0, d)
     n = u.shape[0]
     ctrl_poles = np.linalg.eigvals(np.asarray(rec.controller.A, dtype=float)) \
         if rec.controller.A.size else np.zeros(0)
     n_settle = settle_samples(np.concatenate([ctrl_poles, poles]), n, 1e-6)
     tail = slice(min(n_settle, n // 2), n)
-    scale = float(np.sqrt(np.mean((u[tail] - u[tail].mean(axis=0)) ** 2))) or 1.0
-    head = slice(0, max(1, min(20, n // 50)))
-    return StartState(u=u, d=d, n_settle=n_settle, tail=tail,
-                      rel_tail=float(np.sqrt(np.mean(d[tail] ** 2)) / scale),
-                      rel_head=float(np.sqrt(np.mean(d[head] ** 2)) / scale))
+    return StartState(u=u, d=d, n_settle=n_settle, tail=tail, **_relative(u, d, tail))
+
+
+def _documented(share: float, p_adj: float) -> bool:
+    """No significant part of the difference, above CONTROLLER_SHARE of u's power, follows
+    the excitation."""
+    return not (p_adj < 1e-3 and share > CONTROLLER_SHARE)
 
 
 def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]:
@@ -234,17 +249,17 @@ def check_controller(rec: Recording, poles: NDArray) -> tuple[Check, Check, int]
     u, d, tail, rel_tail, rel_head = st.u, st.d, st.tail, st.rel_tail, st.rel_head
     x = np.concatenate(list(rec.excitation.values()), axis=1)[tail]
     share, p_adj = _coherent_share(d[tail], x, u[tail])
-    ok = not (p_adj < 1e-3 and share > CONTROLLER_SHARE)
-    held = held_samples(rec)
+    ok = _documented(share, p_adj)
     coil = False
-    if not ok and held.any():
+    held = held_samples(rec) if not ok else None
+    if held is not None and held.any():
         # a DAQ that records the coil current records the amplifier's output: where the
         # amplifier held it at its limit it is not the command, and nowhere else
-        share_o, p_o = _coherent_share(np.where(held, 0.0, d)[tail], x, u[tail])
-        coil = ok = not (p_o < 1e-3 and share_o > CONTROLLER_SHARE)
+        masked = st.without(held)
+        share_o, p_o = _coherent_share(masked.d[tail], x, u[tail])
+        coil = ok = _documented(share_o, p_o)
         if coil:
-            share, p_adj = share_o, p_o
-            st = start_state(rec, poles, held)
+            share, p_adj, st = share_o, p_o, masked
             rel_tail, rel_head = st.rel_tail, st.rel_head
     if coil:
         line = (f"controller: the recorded u is what the documented controller makes from the "

@@ -10,11 +10,23 @@ from numpy.typing import NDArray
 from bayes_amb.io.recording import Recording
 from bayes_amb.rig import CHANNELS
 
-__all__ = ["FLAT_SHARE", "at_extremes", "flat_top_channels", "held_samples"]
+__all__ = ["FLAT_SHARE", "at_extremes", "flat_top_channels", "held_ends", "held_half_spans",
+           "held_mask", "held_samples"]
 
 FLAT_SHARE = 1e-3
 """A channel is clipped when at least this share of its samples (and 5) sit at one of its
 two extremes."""
+
+
+def held_ends(x: NDArray) -> tuple[NDArray, NDArray, bool, bool] | None:
+    """A channel's masks at its maximum and minimum (at_extremes) and whether each end is
+    held (at least FLAT_SHARE of the samples, and 5); None for a constant channel."""
+    x = np.asarray(x, dtype=float)
+    if np.ptp(x) <= 0:
+        return None
+    top, bottom = at_extremes(x)
+    need = max(FLAT_SHARE * x.size, 5)
+    return top, bottom, bool(top.sum() >= need), bool(bottom.sum() >= need)
 
 
 def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
@@ -22,13 +34,10 @@ def flat_top_channels(rec: Recording) -> list[tuple[str, int, float]]:
     found = []
     for g, v in (("u", rec.u), ("y", rec.y)):
         v = np.asarray(v, dtype=float)
-        n = v.shape[0]
         for c in range(len(CHANNELS)):
-            if np.ptp(v[:, c]) <= 0:
-                continue
-            top, bottom = at_extremes(v[:, c])
-            share = max(np.sum(top), np.sum(bottom)) / n
-            if share >= FLAT_SHARE and share * n >= 5:
+            ends = held_ends(v[:, c])
+            if ends is not None and (ends[2] or ends[3]):
+                share = max(np.sum(ends[0]), np.sum(ends[1])) / v.shape[0]
                 found.append((g, c, float(share)))
     return found
 
@@ -40,16 +49,21 @@ def at_extremes(x: NDArray) -> tuple[NDArray, NDArray]:
     return x >= x.max() - tol, x <= x.min() + tol
 
 
-def held_samples(rec: Recording) -> NDArray:
-    """(N, 4) mask of the recorded currents' samples at an extreme of a u channel held
-    there (flat_top_channels); all False where no u channel is held."""
-    u = np.asarray(rec.u, dtype=float)
+def held_mask(u: NDArray) -> NDArray:
+    """(N, 4) mask of the samples of the currents ``u`` at an extreme of a channel held
+    there (held_ends); all False where no channel is held."""
+    u = np.asarray(u, dtype=float)
     held = np.zeros(u.shape, dtype=bool)
-    for g, c, _ in flat_top_channels(rec):
-        if g == "u":
-            top, bottom = at_extremes(u[:, c])
-            held[:, c] = top | bottom
+    for c in range(u.shape[1]):
+        ends = held_ends(u[:, c])
+        if ends is not None and (ends[2] or ends[3]):
+            held[:, c] = ends[0] | ends[1]
     return held
+
+
+def held_samples(rec: Recording) -> NDArray:
+    """held_mask of the recording's currents (the u channels of flat_top_channels)."""
+    return held_mask(rec.u)
 
 
 def held_half_spans(u: NDArray) -> list[float]:
@@ -59,16 +73,14 @@ def held_half_spans(u: NDArray) -> list[float]:
     extreme only, that extreme's distance from the channel's median. Empty where no
     channel is held."""
     u = np.asarray(u, dtype=float)
-    n = u.shape[0]
     out = []
     for c in range(u.shape[1]):
-        if np.ptp(u[:, c]) <= 0:
+        ends = held_ends(u[:, c])
+        if ends is None or not (ends[2] or ends[3]):
             continue
-        top, bottom = at_extremes(u[:, c])
-        held = [m.sum() >= max(FLAT_SHARE * n, 5) for m in (top, bottom)]
-        if all(held):
+        if ends[2] and ends[3]:
             out.append(0.5 * float(np.ptp(u[:, c])))
-        elif any(held):
-            end = u[:, c].max() if held[0] else u[:, c].min()
+        else:
+            end = u[:, c].max() if ends[2] else u[:, c].min()
             out.append(abs(float(end - np.median(u[:, c]))))
     return out
