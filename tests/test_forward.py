@@ -34,9 +34,10 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.control.pid import PIDSettings, design_decentralised_pid
 from bayes_amb.control.robustness import loop_spectral_radius
 from bayes_amb.inference.estimate import LogPosterior
-from bayes_amb.inference.forward import ForwardModel, dft_response
+from bayes_amb.inference.forward import ForwardModel, dft_response, diagonalise, observer_block
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.priors import Prior, PriorSet
+from bayes_amb.inference.triangular import takes
 from bayes_amb.inference.whittle import WhittleLikelihood
 from bayes_amb.rig import load_rig
 from bayes_amb.simulate import SimulationConfig, simulate_recording
@@ -79,9 +80,11 @@ def noise_free(rig):
 
 
 def general_path(fm: ForwardModel) -> ForwardModel:
-    """The same forward model forced onto the general loop model (loop_model.py)."""
+    """The same forward model forced onto the general loop model (loop_model.py), its
+    observer block decomposed once (triangular.py) as a general controller's is."""
     g = copy.copy(fm)
     g.fast = False
+    g.fixed = observer_block(g.parts)
     return g
 
 
@@ -114,6 +117,38 @@ def test_dft_response_equals_rfft_of_time_simulation(noise_free, case, path):
             assert np.max(np.abs(Y[b])) <= 1e-12 * np.max(np.abs(np.fft.rfft(fm.x, axis=0)))
             continue
         assert rel_err(Y[b], ref) < 1e-9, (case, path, th)
+
+
+@pytest.mark.parametrize("case", CASES, ids=CASE_IDS)
+def test_the_observer_block_decomposed_once_gives_the_whole_loops_modal_form(noise_free,
+                                                                              case):
+    """triangular.py against the whole loop's decomposition: the same eigenvalues, transfer
+    function and modal state after the record (the state enters the transient term)."""
+    fm = general_path(ForwardModel(noise_free[case], PARAMS))
+    assert fm.fixed is not None
+    A, B, C = fm.excitation_system(THETA_BATCH)
+    assert takes(A, fm.fixed)
+    tri, xi_t = diagonalise(A, B, C, fm.x, fm.engine, fm.fixed)
+    whole, xi_w = diagonalise(A, B, C, fm.x, fm.engine)
+    n = A.shape[1]
+    for b in range(A.shape[0]):
+        for lam in whole.lam[b]:
+            assert np.min(np.abs(tri.lam[b] - lam)) < 1e-9
+        if not np.any(THETA_BATCH[b]):          # S(0) = 0: only rounding to compare
+            continue
+        for z in np.exp(2j * np.pi * np.array([1e-3, 0.02, 0.2, 0.45])):
+            direct = C[b] @ np.linalg.solve(z * np.eye(n) - A[b], B[b])
+            # the whole loop's own decomposition reaches 1.2e-8 here, this one 1e-9
+            H = tri.Cm[b] @ (tri.Bm[b] / (z - tri.lam[b])[:, None])
+            assert rel_err(H, direct) < 1e-8
+            # C (zI - A)^-1 z x_N, the transient term, from either modal state
+            t_tri = tri.Cm[b] @ (z * xi_t[b] / (z - tri.lam[b]))
+            t_whole = whole.Cm[b] @ (z * xi_w[b] / (z - whole.lam[b]))
+            assert rel_err(t_tri, t_whole) < 1e-8
+    # a batch with a member not of that form (the observer driving the loop) is not taken
+    A_bad = A.copy()
+    A_bad[0, 0, -1] = 1.0
+    assert not takes(A_bad, fm.fixed)
 
 
 @pytest.mark.parametrize("case", [c for c in CASES if c[0] == "observer"],

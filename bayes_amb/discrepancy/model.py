@@ -59,7 +59,7 @@ class ExtendedForwardModel(ForwardModel):
     """
 
     _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases",
-               "engine")
+               "engine", "fixed")
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
                  candidates: tuple[Candidate, ...] = (),
@@ -213,7 +213,8 @@ class ExtendedForwardModel(ForwardModel):
         parts = []
         for idx in groups:
             A, B, C = self.excitation_system(Pc[idx])
-            parts.append(diagonalise(A, B, C, x, self.engine))
+            parts.append(diagonalise(A, B, C, x, self.engine,
+                                     None if self.observer_form else self.fixed))
         ns = max(mb.lam.shape[1] for mb, _ in parts)
         nb, p = P.shape[0], self.plant.C.shape[0]
         lam = np.zeros((nb, ns), dtype=complex)

@@ -31,6 +31,13 @@ from bayes_amb.inference.loop_model import (
     loop_matrices,
 )
 from bayes_amb.inference.model_band import choose_model, feedback_part, validity_hz
+from bayes_amb.inference.triangular import (
+    FixedBlock,
+    exact_pairs,
+    fixed_block,
+    modal_triangular,
+    takes,
+)
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
 from bayes_amb.rotor import full_model
@@ -91,17 +98,23 @@ class ModalBatch:
 
 
 def diagonalise(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None = None,
-                engine: kernels.Engine = DEFAULT_ENGINE) -> tuple[ModalBatch, NDArray | None]:
+                engine: kernels.Engine = DEFAULT_ENGINE, fixed: FixedBlock | None = None
+                ) -> tuple[ModalBatch, NDArray | None]:
     """Eigen-decompose a stack of systems; unstable or non-finite members are flagged.
 
     With an input record x, also returns the modal state after its last sample (nb, ns).
     The default path is compiled (bayes_amb.inference.eigen; members it cannot take go to
     ``np.linalg.eig``); with the engine "lapack" or "numpy" every member goes to
-    ``np.linalg.eig`` and the modal state to :func:`final_modal_state`.
+    ``np.linalg.eig`` and the modal state to :func:`final_modal_state`. ``fixed``: the
+    loop's fixed observer block, where A has it (triangular.py): the compiled path then
+    decomposes only the rest of the loop.
     """
     finite = np.all(np.isfinite(A), axis=(1, 2))
     if engine.compiled_modal:
-        lam, Bm, Cm, ok = modal_batch(A, B, C)
+        if fixed is not None and takes(A, fixed):
+            lam, Bm, Cm, ok = modal_triangular(A, B, C, fixed)
+        else:
+            lam, Bm, Cm, ok = modal_batch(A, B, C)
         redo = np.flatnonzero(finite & ~ok)
         if redo.size:
             Bb = np.broadcast_to(B, (A.shape[0], *B.shape[-2:]))
@@ -127,24 +140,17 @@ def state_after(lam: NDArray, Bm: NDArray, x: NDArray,
     return final_modal_state(lam, Bm, x)
 
 
+def observer_block(parts: LoopParts) -> FixedBlock | None:
+    """The fixed trailing block A + L C of loop_matrices' loop, diagonalised
+    (triangular.py), or None where it is not usable."""
+    return fixed_block(parts.A + parts.L @ parts.C)
+
+
 def _real_symmetric(lam: NDArray, Bm: NDArray, Cm: NDArray
                     ) -> tuple[NDArray, NDArray, NDArray]:
     """LAPACK's modal form of real systems with the symmetry exact, as the compiled one has
-    it: the second mode of each adjacent conjugate pair takes the conjugates of the first's
-    Bm and Cm, and real modes real Bm and Cm (both equal to rounding already)."""
-    Bm, Cm = Bm.copy(), Cm.copy()
-    pair = np.zeros(lam.shape, dtype=bool)
-    pair[:, 1:] = (lam[:, 1:] == np.conj(lam[:, :-1])) & (lam[:, 1:].imag != 0)
-    for s in range(1, lam.shape[1]):            # a pair, not a chain
-        pair[:, s] &= ~pair[:, s - 1]
-    b, s = np.nonzero(pair)
-    Bm[b, s] = np.conj(Bm[b, s - 1])
-    Cm[b, :, s] = np.conj(Cm[b, :, s - 1])
-    real = lam.imag == 0
-    Bm[real] = Bm[real].real
-    b, s = np.nonzero(real)
-    Cm[b, :, s] = Cm[b, :, s].real
-    return lam, Bm, Cm
+    it (triangular.exact_pairs, on copies)."""
+    return lam, *exact_pairs(lam, Bm.copy(), Cm.copy())
 
 
 def _diagonalise_lapack(A: NDArray, B: NDArray, C: NDArray, x: NDArray | None
@@ -218,6 +224,8 @@ class ForwardModel:
             L = design_observer_controller(self.reduced, dt).L
             self.parts = LoopParts(ctrl.A, ctrl.B, ctrl.C, ctrl.D, Ad, Bd, self.reduced.C, L,
                                    self.port)
+        # the offline filter's observer block of the general loop, decomposed once
+        self.fixed = None if self.fast else observer_block(self.parts)
 
     def validity_band_hz(self) -> float:
         """Half the frequency (|lambda|/2pi) of the lowest mode the reduction left out."""
@@ -259,7 +267,7 @@ class ForwardModel:
         """Modal form of x -> eps for a batch, and the modal state after the record x
         (default: the recording's excitation)."""
         return diagonalise(*self.excitation_system(theta), self.x if x is None else x,
-                           self.engine)
+                           self.engine, self.fixed)
 
     # ------------------------------------------------------------- predictions
     def simulate(self, theta: NDArray) -> NDArray:
