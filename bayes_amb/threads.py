@@ -24,7 +24,9 @@ from __future__ import annotations
 
 import functools
 import os
+import threading
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from bayes_amb.errors import BayesAmbError
@@ -147,3 +149,49 @@ def pool_threads() -> int:
     except (AttributeError, OSError):
         cpus = os.cpu_count() or 1
     return max(1, min(cpus, MAX_POOL))
+
+
+ROW_THREAD_PREFIX = "bayes-amb-rows"
+_ROW_POOL: tuple[int, int, ThreadPoolExecutor] | None = None     # (pid, threads, pool)
+
+
+def row_pool() -> ThreadPoolExecutor | None:
+    """The process's pool for splitting a batch of likelihood rows (:func:`over_rows`):
+    :func:`pool_threads` threads, made on first use and again after a fork or a change of
+    the count; None where the count is 1 or the caller is one of its own threads."""
+    global _ROW_POOL
+    n = pool_threads()
+    if n <= 1 or threading.current_thread().name.startswith(ROW_THREAD_PREFIX):
+        return None
+    pid = os.getpid()
+    if _ROW_POOL is None or _ROW_POOL[0] != pid or _ROW_POOL[1] != n:
+        _ROW_POOL = (pid, n, ThreadPoolExecutor(n - 1, thread_name_prefix=ROW_THREAD_PREFIX))
+    return _ROW_POOL[2]
+
+
+def over_rows(fn: Callable[[int, int], Any], nb: int, min_rows: int = 2) -> None:
+    """Call ``fn(lo, hi)`` on consecutive ranges of a batch of ``nb`` rows that together
+    cover it: in parallel, one range per thread of :func:`row_pool` plus the calling
+    thread, from ``min_rows`` rows on; as ``fn(0, nb)`` otherwise. For compiled kernels
+    that release the GIL and compute each row alone, so that the result does not depend on
+    the split (bit for bit). An exception of any range is raised here.
+
+    Examples
+    --------
+    >>> seen = []
+    >>> over_rows(lambda lo, hi: seen.append((lo, hi)), 5)
+    >>> sorted(seen)[0][0], sorted(seen)[-1][1], sum(hi - lo for lo, hi in seen)
+    (0, 5, 5)
+    """
+    pool = row_pool() if nb >= min_rows else None
+    if pool is None:
+        fn(0, nb)
+        return
+    k = min(_ROW_POOL[1] if _ROW_POOL else 1, nb)
+    edges = [nb * i // k for i in range(k + 1)]
+    futures = [pool.submit(fn, edges[i], edges[i + 1]) for i in range(1, k)]
+    try:
+        fn(edges[0], edges[1])
+    finally:
+        for f in futures:
+            f.result()

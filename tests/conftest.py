@@ -1,8 +1,16 @@
-"""Fixtures shared by the test modules that run the foreign generator (benchmarks/foreign)."""
+"""Fixtures shared by the test modules that run the foreign generator (benchmarks/foreign),
+and the row threads of xdist workers."""
 
 from __future__ import annotations
 
+import os
+
 import pytest
+
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # each xdist worker is one of the machine's CPUs: the likelihood's batches stay in it
+    # (threads.over_rows); tests that split them set BAYES_AMB_POOL themselves
+    os.environ.setdefault("BAYES_AMB_POOL", "1")
 
 
 @pytest.fixture(scope="session")

@@ -45,6 +45,7 @@ from bayes_amb.inference.hessenberg import (
     _inverse_iteration_lanes,
 )
 from bayes_amb.inference.qr_lanes import _hqr_lanes
+from bayes_amb.threads import over_rows
 
 PIVOT_RATIO = 1e-13
 """The eigenvector basis V_r is refused when its smallest LU pivot is below this fraction
@@ -323,7 +324,8 @@ def modal_batch(A: NDArray, B: NDArray, C: NDArray
     Bm = np.zeros((nb, n, B.shape[2]), dtype=np.complex128)
     Cm = np.zeros((nb, C.shape[1], n), dtype=np.complex128)
     ok = np.zeros(nb, dtype=np.bool_)
-    _modal_batch(A, B, C, lam, Bm, Cm, ok)
+    over_rows(lambda lo, hi: _modal_batch(A[lo:hi], B[lo:hi], C[lo:hi], lam[lo:hi],
+                                          Bm[lo:hi], Cm[lo:hi], ok[lo:hi]), nb)
     return lam, Bm, Cm, ok
 
 
@@ -404,7 +406,9 @@ def final_state(lam: NDArray, Bm: NDArray, x: NDArray, tol: float) -> NDArray:
     in every eigenvalue of the batch at once; the second of two adjacent exactly conjugate
     eigenvalues takes the conjugate of the first's sum (the coefficients are real)."""
     xi = np.empty(lam.shape, dtype=np.complex128)
-    _final_state_batch(np.require(lam, np.complex128, ("C", "W")),   # one signature
-                       np.require(Bm, np.complex128, ("C", "W")),    # (modal_batch)
-                       np.require(x, np.float64, ("C", "W")), float(tol), xi)
+    lam = np.require(lam, np.complex128, ("C", "W"))                 # one signature
+    Bm = np.require(Bm, np.complex128, ("C", "W"))                   # (modal_batch)
+    x = np.require(x, np.float64, ("C", "W"))
+    over_rows(lambda lo, hi: _final_state_batch(lam[lo:hi], Bm[lo:hi], x, float(tol),
+                                                xi[lo:hi]), lam.shape[0])
     return xi

@@ -33,6 +33,8 @@ import numpy as np
 from numba import njit
 from numpy.typing import NDArray
 
+from bayes_amb.threads import over_rows
+
 KERNEL_ENV = "BAYES_AMB_KERNEL"
 
 
@@ -242,10 +244,19 @@ def residual_band_sums(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: N
     """
     out = np.empty((lam.shape[0], starts.size, E.shape[1], E.shape[1]), dtype=complex)
     chunks, width = _chunks(np.asarray(counts), CHUNK_BINS)
-    _residual_band_sums(*_arguments(lam, Bm, Cm, xi, X, z, E, scale, lines, coef),
-                        np.ascontiguousarray(starts, np.int64),
-                        np.ascontiguousarray(counts, np.int64), chunks, width, out)
+    args = _arguments(lam, Bm, Cm, xi, X, z, E, scale, lines, coef)
+    starts = np.ascontiguousarray(starts, np.int64)
+    counts = np.ascontiguousarray(counts, np.int64)
+    over_rows(lambda lo, hi: _residual_band_sums(*rows_of(args, lo, hi), starts, counts,
+                                                 chunks, width, out[lo:hi]), lam.shape[0])
     return out
+
+
+def rows_of(args: tuple, lo: int, hi: int) -> tuple:
+    """The kernels' common arguments (:func:`_arguments`) for the rows lo:hi of the batch:
+    the modal form, the state after the record and the line coefficients are per row."""
+    lam, Bm, Cm, xi, *shared, coef = args
+    return (lam[lo:hi], Bm[lo:hi], Cm[lo:hi], xi[lo:hi], *shared, coef[lo:hi])
 
 
 def lines_or_empty(E: NDArray, nb: int, lines: NDArray | None, coef: NDArray | None
@@ -285,8 +296,9 @@ def residual_dft(lam: NDArray, Bm: NDArray, Cm: NDArray, xi: NDArray, X: NDArray
     band sums. With E = 0 and no lines it is minus the scaled response DFT."""
     nb, nf, p = lam.shape[0], z.size, E.shape[1]
     out_r, out_i = np.empty((nb, p, nf)), np.empty((nb, p, nf))
-    _residual_dft(*_arguments(lam, Bm, Cm, xi, X, z, E, scale, lines, coef),
-                  CHUNK_BINS, out_r, out_i)
+    args = _arguments(lam, Bm, Cm, xi, X, z, E, scale, lines, coef)
+    over_rows(lambda lo, hi: _residual_dft(*rows_of(args, lo, hi), CHUNK_BINS, out_r[lo:hi],
+                                           out_i[lo:hi]), nb)
     out = np.empty((nb, nf, p), dtype=complex)
     out.real = out_r.transpose(0, 2, 1)
     out.imag = out_i.transpose(0, 2, 1)

@@ -288,8 +288,9 @@ class WhittleLikelihood(RowMemory):
         mb, xi = self.modal_state(theta)
         lines, coef = self._line_terms(theta, (mb, xi))
         if self.engine.compiled:
-            return kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
-                                        self.scale, lines, coef), mb.stable
+            return walker_kernels.residual_dft_rows(
+                mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E, self.scale, lines, coef,
+                lanes=self.engine.compiled_modal), mb.stable
         R = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
         if lines is not None:
             R = R - np.einsum("kcl,bl->bkc", lines, coef)
@@ -335,8 +336,9 @@ class WhittleLikelihood(RowMemory):
             return None, None
         mb, xi = modal if modal is not None else self.modal_state(np.atleast_2d(theta))
         if self.engine.compiled:
-            R0 = kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E,
-                                      self.scale)
+            R0 = walker_kernels.residual_dft_rows(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z,
+                                                  self.E, self.scale,
+                                                  lanes=self.engine.compiled_modal)
         else:
             R0 = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
         flat = R0.reshape(R0.shape[0], -1)

@@ -25,6 +25,7 @@ from types import FrameType
 from typing import Any
 
 from bayes_amb.errors import StudyInterrupted
+from bayes_amb.threads import POOL_VAR
 
 __all__ = ["StopSignals", "kill_processes", "worker_init"]
 
@@ -115,6 +116,8 @@ def worker_init(study_pid: int | None = None) -> None:
     poll every second).
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # the workers are the parallelism: a batch's rows stay in its worker (threads.over_rows)
+    os.environ.setdefault(POOL_VAR, "1")
     if study_pid is None:
         return
     try:
