@@ -28,3 +28,18 @@ def test_a_hair_wide_laplace_at_the_bound_gets_the_prior():
 def test_a_measured_spread_near_the_bound_is_kept():
     d = draws(_fit([0.75, 0.1], np.diag([0.02 ** 2, 0.02 ** 2])), seed=3)
     assert d[:, 0].max() <= 0.8 and abs(d[:, 0].std() - 0.018) < 0.004
+
+
+def test_a_narrow_posterior_pressed_against_the_bound_gets_the_prior():
+    # the foreign pair_current_limit_sensor_gain_00 case: k_Bx at -0.7952 (0.3 % of the
+    # prior's width inside its bound) with sd 0.005, its truth 0.26: the data push it to
+    # the wall, and [-0.8, -0.785] would have claimed it
+    d = draws(_fit([-0.7952, 0.1], np.diag([0.005 ** 2, 0.02 ** 2])), seed=3)
+    assert 0.4 < d[:, 0].std() < 0.52 and d[:, 0].max() > 0.7
+    assert abs(d[:, 1].std() - 0.02) < 0.002
+
+
+def test_a_wide_posterior_with_a_tail_past_the_bound_keeps_its_spread():
+    # MAP far inside, 10 % of its Laplace mass beyond the wall: the data inform it
+    d = draws(_fit([-0.42, 0.1], np.diag([0.3 ** 2, 0.02 ** 2])), seed=3)
+    assert abs(np.mean(d[:, 0]) + 0.40) < 0.03 and d[:, 0].std() < 0.3   # prior: 0, 0.46

@@ -238,9 +238,11 @@ class Regression:
             wt = 1.0 / np.sqrt(np.maximum(s2[self.group], 1e-300))
         return b, wt
 
-    def gain(self, limit: float) -> tuple[float, float, NDArray]:
-        """beta, its sd and the row weights at one limit."""
-        X = np.column_stack([self.z_rows(limit), self.J])
+    def gain(self, limit: float, centre: NDArray | None = None
+             ) -> tuple[float, float, NDArray]:
+        """beta, its sd and the row weights at one limit (and centre: default the
+        medians)."""
+        X = np.column_stack([self.z_rows(limit, centre), self.J])
         b, wt = self.band_weights(X, self.y)
         Xw = X * wt[:, None]
         return float(b[0]), float(np.sqrt(np.linalg.pinv(Xw.T @ Xw)[0, 0])), wt
