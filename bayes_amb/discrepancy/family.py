@@ -54,7 +54,7 @@ from bayes_amb.discrepancy.library.unbalance import Unbalance
 from bayes_amb.discrepancy.prescreen import NESTED_TOL
 from bayes_amb.inference.priors import Prior
 from bayes_amb.reduction.pseudo_modal import ReducedModel
-from bayes_amb.rotor import assemble, dof_index
+from bayes_amb.rotor import dof_index
 from bayes_amb.uncertainty import lft_reduced
 
 RANK_TOL = 1e-11
@@ -81,7 +81,7 @@ class VirtualPlane(Unbalance):
     weights: tuple[float, ...] = ()
 
     def line_force(self, ctx: ModelContext) -> NDArray:
-        mats = assemble(ctx.rig)
+        mats = ctx.assembled()
         n_q = mats.n_q
         w = np.asarray(self.weights)
         Bf = np.zeros((2 * n_q, 2))
@@ -97,7 +97,7 @@ class VirtualPlane(Unbalance):
 
 def virtual_planes(T_L: NDArray, ctx: ModelContext) -> tuple[VirtualPlane, ...]:
     """The planes spanning every node's T_L Bf (orthonormal there), for the model's T_L."""
-    mats = assemble(ctx.rig)
+    mats = ctx.assembled()
     n_q, n = mats.n_q, ctx.rig.n_nodes
     T_v = T_L[:, n_q:]                                  # forces enter the velocity rows
     V = np.vstack([T_v @ mats.M_inv[:, [dof_index(j, ax) for j in range(1, n + 1)]]

@@ -47,7 +47,8 @@ def model_context(forward: ForwardModel) -> ModelContext:
     return ModelContext(rig=forward.recording.rig, dt=forward.dt,
                         speed_rpm=forward.recording.speed_rpm,
                         bending_hz=tuple(float(v) for v in np.abs(bend) / (2 * np.pi)),
-                        bending_zeta=tuple(float(v) for v in -bend.real / np.abs(bend)))
+                        bending_zeta=tuple(float(v) for v in -bend.real / np.abs(bend)),
+                        matrices=forward.reduced.full.matrices)
 
 
 class ExtendedForwardModel(ForwardModel):
@@ -59,7 +60,7 @@ class ExtendedForwardModel(ForwardModel):
     """
 
     _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases",
-               "engine", "fixed")
+               "_statics", "engine", "fixed")
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
                  candidates: tuple[Candidate, ...] = (),
@@ -75,6 +76,8 @@ class ExtendedForwardModel(ForwardModel):
             self.ctx = model_context(self)
             self._bases: dict[tuple[int, ...], ReducedModel] = {
                 tuple(range(1, self.reduced.n_bending + 1)): self.reduced}
+            # the truncated modes' static compliance per set of kept pairs
+            self._statics: dict[tuple[int, ...], np.ndarray] = {}
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
@@ -96,8 +99,9 @@ class ExtendedForwardModel(ForwardModel):
         # the first state of each candidate's bending pair (modal hook)
         self._first = [N_RIGID + 4 * pairs.index(c.bending_pairs()[0]) if c.bending_pairs()
                        else N_RIGID for c in self.candidates]
-        self.ctx = replace(self.ctx, kept_pairs=pairs,
-                           static_residual=residual_static(self.reduced.full, pairs))
+        if pairs not in self._statics:
+            self._statics[pairs] = residual_static(self.reduced.full, pairs)
+        self.ctx = replace(self.ctx, kept_pairs=pairs, static_residual=self._statics[pairs])
         lft_names = list(self.theta_names)
         for c in self.candidates:
             lft_names += [n for n in c.lft_names() if n not in lft_names]

@@ -36,6 +36,7 @@ from numpy.typing import NDArray
 from bayes_amb.inference.batched import expm_batched
 from bayes_amb.inference.priors import Prior
 from bayes_amb.rig import CHANNELS, Rig
+from bayes_amb.rotor.assembly import RotorMatrices, assemble
 
 
 @dataclass(frozen=True)
@@ -150,7 +151,9 @@ class ModelContext:
     at that speed, lowest first (backward and forward whirl of pair 1, then pair 2, ...);
     per model: the bending pairs it keeps (1-based) and ``static_residual`` (4, 4), the
     static contribution in m/A of every FE mode the model leaves out, from actuator current
-    to sensor displacement (G_FE(0) - G_model(0) with G(0) = -C A^-1 B, nominal bearings)."""
+    to sensor displacement (G_FE(0) - G_model(0) with G(0) = -C A^-1 B, nominal bearings);
+    ``matrices``: the rig's assembled FE matrices (the forces candidates place on nodes).
+    """
 
     rig: Rig
     dt: float
@@ -159,6 +162,12 @@ class ModelContext:
     bending_zeta: tuple[float, ...]
     kept_pairs: tuple[int, ...] = ()
     static_residual: NDArray | None = field(default=None, compare=False, repr=False)
+    matrices: RotorMatrices | None = field(default=None, compare=False, repr=False)
+
+    def assembled(self) -> RotorMatrices:
+        """The rig's assembled FE matrices: the model's own (``matrices``, assembled once
+        with its FE model), or assembled here (a context made without them)."""
+        return self.matrices if self.matrices is not None else assemble(self.rig)
 
     @property
     def omega_rot(self) -> float:

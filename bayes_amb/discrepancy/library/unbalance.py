@@ -14,7 +14,7 @@ from bayes_amb.discrepancy.library.base import (
 )
 from bayes_amb.inference.priors import Prior
 from bayes_amb.rig import Rig
-from bayes_amb.rotor import assemble, dof_index
+from bayes_amb.rotor import dof_index
 
 NODE_SCAN = ("n14", "n20", "n27")
 """Shaft nodes tried besides the discs on the reference rig (between the bearings, at
@@ -53,7 +53,7 @@ class Unbalance(SynchronousLine):
 
     def line_force(self, ctx):
         node = node_of(ctx.rig, self.location)
-        mats = assemble(ctx.rig)
+        mats = ctx.assembled()
         n_q = mats.n_q
         Bf = np.zeros((2 * n_q, 2))
         for col, ax in enumerate(("x", "y")):
