@@ -26,7 +26,7 @@ from bayes_amb.control.export import export_controller, reference_controller
 from bayes_amb.discrepancy import ActuatorLag, Unbalance
 from bayes_amb.discrepancy.likelihood import RobustWhittle
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference import band_algebra, block_sums, kernels, walker_kernels
+from bayes_amb.inference import band_algebra, block_sums, kernels, residual_rows, walker_kernels
 from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.whittle import WhittleLikelihood
@@ -119,7 +119,7 @@ def test_residual_dft_equals_the_numpy_path(rec, width, monkeypatch):
 
 
 def test_residual_dft_across_the_batch_equals_the_row_by_row_kernel(rec):
-    """walker_kernels.residual_dft_lanes (real 2 x 2 blocks, vectorised across the rows;
+    """residual_rows.residual_dft_lanes (real 2 x 2 blocks, vectorised across the rows;
     the Gauss-Newton linearisations' kernel) against kernels.residual_dft on the same modal
     form, lines included, within the rounding of the terms; each row's residual does not
     depend on the batch it came in (bit for bit)."""
@@ -129,14 +129,14 @@ def test_residual_dft_across_the_batch_equals_the_row_by_row_kernel(rec):
         mb, xi = like.forward.modal(P, like.x_w)
         lines, coef = like._line_terms(P, (mb, xi))
         args = (like.X, like.z, like.E, like.scale, lines, coef)
-        fast = walker_kernels.residual_dft_lanes(mb.lam, mb.Bm, mb.Cm, xi, *args)
+        fast = residual_rows.residual_dft_lanes(mb.lam, mb.Bm, mb.Cm, xi, *args)
         assert fast is not None
         ref = kernels.residual_dft(mb.lam, mb.Bm, mb.Cm, xi, *args)
         r_abs, n_ops = _residual_majorant(like, P)
         tol = 4 * 4 * gamma(n_ops) * r_abs
         assert np.all(np.abs(fast - ref) <= tol), float(np.max(np.abs(fast - ref) / tol))
         some = np.array([P.shape[0] - 1, 3, 0])
-        part = walker_kernels.residual_dft_lanes(
+        part = residual_rows.residual_dft_lanes(
             mb.lam[some], mb.Bm[some], mb.Cm[some], xi[some], like.X, like.z, like.E,
             like.scale, lines, None if coef is None else coef[some])
         assert np.array_equal(part, fast[some])

@@ -190,7 +190,7 @@ def test_the_likelihood_kernels_give_the_same_rows_in_threads_bit_for_bit(monkey
     """The compiled modal form, the state after the record, the residual DFT and the band
     sums (both kernels of each) computed with the batch split across threads equal the
     single-threaded results exactly: every row is computed alone."""
-    from bayes_amb.inference import kernels, walker_kernels
+    from bayes_amb.inference import kernels, residual_rows, walker_kernels
     from bayes_amb.inference.eigen import final_state, modal_batch
 
     rng = np.random.default_rng(3)
@@ -209,7 +209,7 @@ def test_the_likelihood_kernels_give_the_same_rows_in_threads_bit_for_bit(monkey
         xi = final_state(lam, Bm, x, 1e-13)
         args = (lam, Bm, Cm, xi, X, z, E, 2.0)
         return (lam, Bm, Cm, ok, xi, kernels.residual_dft(*args),
-                walker_kernels.residual_dft_lanes(*args),
+                residual_rows.residual_dft_lanes(*args),
                 kernels.residual_band_sums(*args, starts, counts),
                 walker_kernels.residual_band_sums_lanes(*args, starts, counts))
 

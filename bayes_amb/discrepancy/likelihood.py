@@ -51,7 +51,7 @@ from scipy.signal import lfilter
 from scipy.special import gammaln
 
 from bayes_amb.discrepancy.model import ExtendedForwardModel
-from bayes_amb.inference import walker_kernels
+from bayes_amb.inference import residual_rows
 from bayes_amb.inference.forward import ModalBatch, dft_response, state_after
 from bayes_amb.inference.narrow_lines import SPEED_TOLERANCE
 from bayes_amb.inference.whittle import WhittleLikelihood
@@ -188,7 +188,7 @@ class RobustWhittle(WhittleLikelihood):
         mb, xi = self.modal_state(P)
         if self.engine.compiled:
             zero = np.zeros_like(self.E)
-            return -walker_kernels.residual_dft_rows(
+            return -residual_rows.residual_dft_rows(
                 mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, zero, self.scale,
                 lanes=self.engine.compiled_modal), mb.stable
         return dft_response(mb, self.X, self.z, xi) / self.scale, mb.stable

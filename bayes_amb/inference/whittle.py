@@ -47,7 +47,7 @@ from scipy.signal import lfilter
 
 from bayes_amb.control.discrete import ss_freqresp_modal
 from bayes_amb.errors import BayesAmbError
-from bayes_amb.inference import band_algebra, kernels, walker_kernels
+from bayes_amb.inference import band_algebra, kernels, residual_rows, walker_kernels
 from bayes_amb.inference.band_algebra import logdet_and_trace_numpy
 from bayes_amb.inference.forward import _TRANSIENT_TOL, ForwardModel, ModalBatch, dft_response
 from bayes_amb.inference.fused import FusedLikelihood
@@ -288,7 +288,7 @@ class WhittleLikelihood(RowMemory):
         mb, xi = self.modal_state(theta)
         lines, coef = self._line_terms(theta, (mb, xi))
         if self.engine.compiled:
-            return walker_kernels.residual_dft_rows(
+            return residual_rows.residual_dft_rows(
                 mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z, self.E, self.scale, lines, coef,
                 lanes=self.engine.compiled_modal), mb.stable
         R = self.E[None] - dft_response(mb, self.X, self.z, xi) / self.scale
@@ -336,7 +336,7 @@ class WhittleLikelihood(RowMemory):
             return None, None
         mb, xi = modal if modal is not None else self.modal_state(np.atleast_2d(theta))
         if self.engine.compiled:
-            R0 = walker_kernels.residual_dft_rows(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z,
+            R0 = residual_rows.residual_dft_rows(mb.lam, mb.Bm, mb.Cm, xi, self.X, self.z,
                                                   self.E, self.scale,
                                                   lanes=self.engine.compiled_modal)
         else:
