@@ -37,6 +37,7 @@ from bayes_amb.discrepancy.model_error import model_error
 from bayes_amb.inference.doubted import within_band
 from bayes_amb.inference.priors import Prior
 from bayes_amb.io.recording import Recording
+from bayes_amb.threads import POOL_VAR
 
 BACKEND_ENV = "BAYES_AMB_ADEQUACY"
 """Environment variable: "thread" keeps the adequacy test in a thread of the caller."""
@@ -77,6 +78,9 @@ def _child(conn: Connection, parent: int, args: tuple[Any, ...]) -> None:
     the parent's to handle (it ends this process, or the kernel does when it dies)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     _die_with(parent)
+    # the fit beside it takes the other core: this one's batches stay in one thread
+    # (threads.over_rows; with two each, identify on ROSS's test rig took 12 % longer)
+    os.environ[POOL_VAR] = "1"
     # the process's own streams: a notebook's sys.stderr is a socket the kernel's threads
     # flush, and those threads are not in a forked process (a warning goes to fd 2)
     sys.stdout = sys.__stdout__ or sys.stdout
