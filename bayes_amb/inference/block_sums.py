@@ -72,6 +72,73 @@ def _pack_blocks(M, B2, C2, x2):  # pragma: no cover - compiled
     return D
 
 
+@njit(cache=True, nogil=True, error_model="numpy", inline="always")
+def _bin_residual(D, ch, w, b0, k, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, acc
+                  ):  # pragma: no cover - compiled
+    # The residual R_k of bin k for the w walkers of chunk ch into acc (2 p, LANES): per
+    # block w = B2 X_k - z_k x2, u = (z_k I - M)^-1 w, C2 u summed, then R = E - (C u) -
+    # lines . coef; the written-out kernels' shared arithmetic, in _band_sums_pairs' order
+    nsl = D.shape[1]
+    nl = coef.shape[0]
+    p = N_OUT
+    zrk, zik = zr[k], zi[k]
+    xr0, xr1, xr2, xr3 = Xr[k, 0], Xr[k, 1], Xr[k, 2], Xr[k, 3]
+    xi0, xi1, xi2, xi3 = Xi[k, 0], Xi[k, 1], Xi[k, 2], Xi[k, 3]
+    for i in range(2 * p):
+        for b in range(w):
+            acc[i, b] = 0.0
+    for q in range(nsl):
+        for b in range(w):
+            x1, x2 = D[ch, q, 0, b], D[ch, q, 1, b]
+            w1r, w1i = -zrk * x1, -zik * x1
+            w2r, w2i = -zrk * x2, -zik * x2
+            a, c = D[ch, q, 2, b], D[ch, q, 6, b]
+            w1r += a * xr0
+            w1i += a * xi0
+            w2r += c * xr0
+            w2i += c * xi0
+            a, c = D[ch, q, 3, b], D[ch, q, 7, b]
+            w1r += a * xr1
+            w1i += a * xi1
+            w2r += c * xr1
+            w2i += c * xi1
+            a, c = D[ch, q, 4, b], D[ch, q, 8, b]
+            w1r += a * xr2
+            w1i += a * xi2
+            w2r += c * xr2
+            w2i += c * xi2
+            a, c = D[ch, q, 5, b], D[ch, q, 9, b]
+            w1r += a * xr3
+            w1i += a * xi3
+            w2r += c * xr3
+            w2i += c * xi3
+            u1r, u1i, u2r, u2i = solve_block(
+                zrk, zik, D[ch, q, 10, b], D[ch, q, 11, b], D[ch, q, 12, b],
+                D[ch, q, 13, b], w1r, w1i, w2r, w2i)
+            a, c = D[ch, q, 14, b], D[ch, q, 15, b]
+            acc[0, b] += a * u1r + c * u2r
+            acc[4, b] += a * u1i + c * u2i
+            a, c = D[ch, q, 16, b], D[ch, q, 17, b]
+            acc[1, b] += a * u1r + c * u2r
+            acc[5, b] += a * u1i + c * u2i
+            a, c = D[ch, q, 18, b], D[ch, q, 19, b]
+            acc[2, b] += a * u1r + c * u2r
+            acc[6, b] += a * u1i + c * u2i
+            a, c = D[ch, q, 20, b], D[ch, q, 21, b]
+            acc[3, b] += a * u1r + c * u2r
+            acc[7, b] += a * u1i + c * u2i
+    for i in range(p):                  # R = E - (C u) - lines . coef
+        eri, eii = Er[k, i], Ei[k, i]
+        for b in range(w):
+            acc[i, b] = eri - acc[i, b]
+            acc[p + i, b] = eii - acc[p + i, b]
+        for j in range(nl):
+            lrj, lij = Lr[k, i, j], Li[k, i, j]
+            for b in range(w):
+                acc[i, b] -= lrj * coef[j, b0 + b]
+                acc[p + i, b] -= lij * coef[j, b0 + b]
+
+
 @njit(cache=True, nogil=True, error_model="numpy")
 def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, counts, out,
                        packed):  # pragma: no cover - compiled
@@ -81,8 +148,7 @@ def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, coun
     # into out (nb, nbands, 4, 4) complex or, where packed is not empty, into packed
     # (chunks, nbands, 16, LANES) as band_algebra's kernel reads it (the lower triangle:
     # real and imaginary parts of the conjugates of the upper triangle's sums)
-    nch, nsl = D.shape[0], D.shape[1]
-    nl = coef.shape[0]
+    nch = D.shape[0]
     p = N_OUT
     acc = np.empty((2 * p, LANES))                  # R: real parts, then imaginary parts
     sr, si = np.empty((p, p, LANES)), np.empty((p, p, LANES))
@@ -96,62 +162,7 @@ def _band_sums_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, starts, coun
                         sr[i, j, b] = 0.0
                         si[i, j, b] = 0.0
             for k in range(starts[band], starts[band] + counts[band]):
-                zrk, zik = zr[k], zi[k]
-                xr0, xr1, xr2, xr3 = Xr[k, 0], Xr[k, 1], Xr[k, 2], Xr[k, 3]
-                xi0, xi1, xi2, xi3 = Xi[k, 0], Xi[k, 1], Xi[k, 2], Xi[k, 3]
-                for i in range(2 * p):
-                    for b in range(w):
-                        acc[i, b] = 0.0
-                for q in range(nsl):
-                    for b in range(w):
-                        x1, x2 = D[ch, q, 0, b], D[ch, q, 1, b]
-                        w1r, w1i = -zrk * x1, -zik * x1
-                        w2r, w2i = -zrk * x2, -zik * x2
-                        a, c = D[ch, q, 2, b], D[ch, q, 6, b]
-                        w1r += a * xr0
-                        w1i += a * xi0
-                        w2r += c * xr0
-                        w2i += c * xi0
-                        a, c = D[ch, q, 3, b], D[ch, q, 7, b]
-                        w1r += a * xr1
-                        w1i += a * xi1
-                        w2r += c * xr1
-                        w2i += c * xi1
-                        a, c = D[ch, q, 4, b], D[ch, q, 8, b]
-                        w1r += a * xr2
-                        w1i += a * xi2
-                        w2r += c * xr2
-                        w2i += c * xi2
-                        a, c = D[ch, q, 5, b], D[ch, q, 9, b]
-                        w1r += a * xr3
-                        w1i += a * xi3
-                        w2r += c * xr3
-                        w2i += c * xi3
-                        u1r, u1i, u2r, u2i = solve_block(
-                            zrk, zik, D[ch, q, 10, b], D[ch, q, 11, b], D[ch, q, 12, b],
-                            D[ch, q, 13, b], w1r, w1i, w2r, w2i)
-                        a, c = D[ch, q, 14, b], D[ch, q, 15, b]
-                        acc[0, b] += a * u1r + c * u2r
-                        acc[4, b] += a * u1i + c * u2i
-                        a, c = D[ch, q, 16, b], D[ch, q, 17, b]
-                        acc[1, b] += a * u1r + c * u2r
-                        acc[5, b] += a * u1i + c * u2i
-                        a, c = D[ch, q, 18, b], D[ch, q, 19, b]
-                        acc[2, b] += a * u1r + c * u2r
-                        acc[6, b] += a * u1i + c * u2i
-                        a, c = D[ch, q, 20, b], D[ch, q, 21, b]
-                        acc[3, b] += a * u1r + c * u2r
-                        acc[7, b] += a * u1i + c * u2i
-                for i in range(p):                  # R = E - (C u) - lines . coef
-                    eri, eii = Er[k, i], Ei[k, i]
-                    for b in range(w):
-                        acc[i, b] = eri - acc[i, b]
-                        acc[p + i, b] = eii - acc[p + i, b]
-                    for j in range(nl):
-                        lrj, lij = Lr[k, i, j], Li[k, i, j]
-                        for b in range(w):
-                            acc[i, b] -= lrj * coef[j, b0 + b]
-                            acc[p + i, b] -= lij * coef[j, b0 + b]
+                _bin_residual(D, ch, w, b0, k, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, acc)
                 for i in range(p):                  # upper triangle of P_b += R R^H
                     for j in range(i, p):
                         for b in range(w):
@@ -182,8 +193,7 @@ def _residual_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, out_r, out_i
     # The residual DFT itself, bin by bin, from the packed block form of _pack_blocks: the
     # operations of _band_sums_blocks4 up to R = E - (C u) - lines . coef, in its order,
     # with R stored (out_r, out_i: (nb, 4, nf)) instead of summed into bands
-    nch, nsl = D.shape[0], D.shape[1]
-    nl = coef.shape[0]
+    nch = D.shape[0]
     p = N_OUT
     nf = zr.size
     acc = np.empty((2 * p, LANES))                  # R: real parts, then imaginary parts
@@ -191,62 +201,7 @@ def _residual_blocks4(D, nb, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, out_r, out_i
         b0 = ch * LANES
         w = min(LANES, nb - b0)
         for k in range(nf):
-            zrk, zik = zr[k], zi[k]
-            xr0, xr1, xr2, xr3 = Xr[k, 0], Xr[k, 1], Xr[k, 2], Xr[k, 3]
-            xi0, xi1, xi2, xi3 = Xi[k, 0], Xi[k, 1], Xi[k, 2], Xi[k, 3]
-            for i in range(2 * p):
-                for b in range(w):
-                    acc[i, b] = 0.0
-            for q in range(nsl):
-                for b in range(w):
-                    x1, x2 = D[ch, q, 0, b], D[ch, q, 1, b]
-                    w1r, w1i = -zrk * x1, -zik * x1
-                    w2r, w2i = -zrk * x2, -zik * x2
-                    a, c = D[ch, q, 2, b], D[ch, q, 6, b]
-                    w1r += a * xr0
-                    w1i += a * xi0
-                    w2r += c * xr0
-                    w2i += c * xi0
-                    a, c = D[ch, q, 3, b], D[ch, q, 7, b]
-                    w1r += a * xr1
-                    w1i += a * xi1
-                    w2r += c * xr1
-                    w2i += c * xi1
-                    a, c = D[ch, q, 4, b], D[ch, q, 8, b]
-                    w1r += a * xr2
-                    w1i += a * xi2
-                    w2r += c * xr2
-                    w2i += c * xi2
-                    a, c = D[ch, q, 5, b], D[ch, q, 9, b]
-                    w1r += a * xr3
-                    w1i += a * xi3
-                    w2r += c * xr3
-                    w2i += c * xi3
-                    u1r, u1i, u2r, u2i = solve_block(
-                        zrk, zik, D[ch, q, 10, b], D[ch, q, 11, b], D[ch, q, 12, b],
-                        D[ch, q, 13, b], w1r, w1i, w2r, w2i)
-                    a, c = D[ch, q, 14, b], D[ch, q, 15, b]
-                    acc[0, b] += a * u1r + c * u2r
-                    acc[4, b] += a * u1i + c * u2i
-                    a, c = D[ch, q, 16, b], D[ch, q, 17, b]
-                    acc[1, b] += a * u1r + c * u2r
-                    acc[5, b] += a * u1i + c * u2i
-                    a, c = D[ch, q, 18, b], D[ch, q, 19, b]
-                    acc[2, b] += a * u1r + c * u2r
-                    acc[6, b] += a * u1i + c * u2i
-                    a, c = D[ch, q, 20, b], D[ch, q, 21, b]
-                    acc[3, b] += a * u1r + c * u2r
-                    acc[7, b] += a * u1i + c * u2i
-            for i in range(p):                      # R = E - (C u) - lines . coef
-                eri, eii = Er[k, i], Ei[k, i]
-                for b in range(w):
-                    acc[i, b] = eri - acc[i, b]
-                    acc[p + i, b] = eii - acc[p + i, b]
-                for j in range(nl):
-                    lrj, lij = Lr[k, i, j], Li[k, i, j]
-                    for b in range(w):
-                        acc[i, b] -= lrj * coef[j, b0 + b]
-                        acc[p + i, b] -= lij * coef[j, b0 + b]
+            _bin_residual(D, ch, w, b0, k, Xr, Xi, zr, zi, Er, Ei, Lr, Li, coef, acc)
             for i in range(p):
                 for b in range(w):
                     out_r[b0 + b, i, k] = acc[i, b]
