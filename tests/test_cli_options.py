@@ -15,13 +15,15 @@ from __future__ import annotations
 import argparse
 import math
 import re
+import subprocess
+import sys
 
 import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
 from bayes_amb.cli.bench_cmd import selected
-from bayes_amb.cli.main import build_parser, main
+from bayes_amb.cli.main import COMMAND_MODULES, build_parser, main
 from bayes_amb.cli.options import integer, range_text, real, seed
 
 # Values that broke or could break option parsing: negative and scientific numbers, the
@@ -269,6 +271,36 @@ def test_every_parser_formats_its_help():
     for path, p in parsers:
         text = p.format_help()
         assert text.startswith("usage:"), path
+
+
+def _options(parser: argparse.ArgumentParser) -> list[tuple]:
+    """Every option of a parser and its nested subparsers: flags, dest, default, choices."""
+    return [(path, tuple(a.option_strings), a.dest, repr(a.default), repr(a.choices))
+            for path, p in _all_parsers(parser) for a in p._actions
+            if not isinstance(a, argparse._SubParsersAction)]
+
+
+def test_one_commands_parser_is_that_command_of_the_whole_parser():
+    """A run builds only its own command's parser (COMMAND_MODULES): the same options,
+    defaults and choices as the command in the parser of every command, and every command
+    of that parser has a module."""
+    whole = {path[0]: p for path, p in _all_parsers(build_parser()) if len(path) == 1}
+    assert set(whole) == set(COMMAND_MODULES)
+    for name in COMMAND_MODULES:
+        alone = {path[0]: p for path, p in _all_parsers(build_parser(name)) if len(path) == 1}
+        assert name in alone
+        assert _options(alone[name]) == _options(whole[name]), name
+
+
+def test_a_light_command_does_not_import_the_heavy_libraries():
+    """`bayes-amb params` builds its parser alone: neither python-control nor ArviZ (about
+    3 s of imports before) is loaded, and the global --threads value is not taken for the
+    command."""
+    code = ("import sys; from bayes_amb.cli.main import main; rc = main(['--threads', '1', "
+            "'params']); print(rc, 'control' in sys.modules, 'arviz' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.stdout.strip().splitlines()[-1] == "0 False False", out.stdout + out.stderr
 
 
 @pytest.mark.parametrize("argv", [["--help"], ["answers", "--help"], ["rig", "--help"]])

@@ -36,8 +36,23 @@ class _OneLineParser(argparse.ArgumentParser):
         raise SystemExit(2)
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from bayes_amb.cli import model_cmd, params_cmd
+COMMAND_MODULES = {
+    "model": "model_cmd", "params": "params_cmd", "controller": "controller_cmd",
+    "simulate": "simulate_cmd", "identify": "identify_cmd", "study": "study_cmd",
+    "bench": "bench_cmd", "diagnose": "diagnose_cmd", "library": "library_cmd",
+    "report": "report_cmd", "demo": "demo_cmd", "import": "import_cmd",
+    "import-controller": "import_cmd", "rig": "rig_cmd", "answers": "answers_cmd",
+    "plan": "plan_cmd", "compare": "compare_cmd",
+}
+"""Each command and the module of bayes_amb.cli that registers it, in the order of
+``bayes-amb --help``. A command's module imports what its run needs (python-control,
+ArviZ, matplotlib: seconds), so a run builds only its own command's parser."""
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or of ``command`` alone (a name of COMMAND_MODULES):
+    the same options, without importing the other commands' modules."""
+    import importlib
 
     parser = _OneLineParser(prog="bayes-amb", description="Bayesian closed-loop "
                             "identification of rotors on active magnetic bearings.")
@@ -46,26 +61,23 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--threads", metavar="N", help="BLAS/OpenMP threads (default: "
                         f"${THREADS_ENV} or 1; 0 keeps the libraries' own default)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_OneLineParser)
-    for mod in (model_cmd, params_cmd):
-        mod.add_parser(sub)
-    _add_optional_commands(sub)
+    names = (COMMAND_MODULES[command],) if command in COMMAND_MODULES else COMMAND_MODULES.values()
+    for name in dict.fromkeys(names):
+        importlib.import_module(f"bayes_amb.cli.{name}").add_parser(sub)
     return parser
 
 
-def _add_optional_commands(sub: argparse._SubParsersAction) -> None:
-    """Commands of later pipeline stages register here when their modules exist."""
-    import importlib
-
-    for name in ("controller_cmd", "simulate_cmd", "identify_cmd", "study_cmd", "bench_cmd",
-                 "diagnose_cmd", "library_cmd", "report_cmd", "demo_cmd", "import_cmd", "rig_cmd",
-                 "answers_cmd", "plan_cmd", "compare_cmd"):
-        try:
-            mod = importlib.import_module(f"bayes_amb.cli.{name}")
-        except ModuleNotFoundError as exc:
-            if exc.name != f"bayes_amb.cli.{name}":
-                raise
-            continue
-        mod.add_parser(sub)
+def _command_of(argv: list[str]) -> str | None:
+    """The command named in argv (the first word after the global options), or None."""
+    skip = False
+    for arg in argv:
+        if skip:
+            skip = False
+        elif arg == "--threads":
+            skip = True
+        elif not arg.startswith("-"):
+            return arg
+    return None
 
 
 def _threads_option(argv: list[str]) -> str | None:
@@ -104,7 +116,7 @@ def main(argv: list[str] | None = None) -> int:
     except BayesAmbError as exc:
         sys.stderr.write(f"bayes-amb: error: {exc}\n")
         return 2
-    parser = build_parser()
+    parser = build_parser(_command_of(sys.argv[1:] if argv is None else argv))
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:                 # a usage error (status 2), --help or --version
