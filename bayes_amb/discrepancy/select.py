@@ -65,6 +65,7 @@ from bayes_amb.discrepancy.family import VirtualPlane, member_screens, scan_fami
 from bayes_amb.discrepancy.fitting import (
     FittedModel,
     _embed,
+    bound_occam,
     extend,
     free_covariance,
     local_fit,
@@ -247,10 +248,14 @@ def score(parent: FittedModel, fm: FittedModel) -> FittedModel:
     fm.cov = free_covariance(fm.post, fm.x, last=idx.size)
     log_bf = -np.inf
     if fm.cov is not None and np.isfinite(fm.log_post):
-        block = fm.cov[np.ix_(idx, idx)]
-        sign, logdet = np.linalg.slogdet(2 * np.pi * block)
-        if sign > 0 and np.all(np.diag(block) > 0):
-            log_bf = (fm.log_post - parent.log_post) + 0.5 * logdet
+        # an own parameter on its prior's bound (an overdamped second-order actuator at
+        # zeta's upper bound) has a one-sided factor, the others their Laplace one
+        log_bound, on = bound_occam(fm.post, fm.x, idx)
+        free = idx[~on]
+        block = fm.cov[np.ix_(free, free)]
+        sign, logdet = np.linalg.slogdet(2 * np.pi * block) if free.size else (1.0, 0.0)
+        if sign > 0 and np.all(np.diag(block) > 0) and np.isfinite(log_bound):
+            log_bf = (fm.log_post - parent.log_post) + 0.5 * logdet + log_bound
     fm.log_bf = float(log_bf)
     log.info("refined %s: log BF %.1f", fm.candidates[-1].key, log_bf)
     return fm
