@@ -63,3 +63,17 @@ def test_at_the_null_the_bayes_factor_never_exceeds_one(slope):
     log_bf = np.log(1 / W) + log_f
     assert log_bf <= 1e-9
     assert log_bf == pytest.approx(np.log(-np.expm1(-slope * W) / (slope * W)), abs=1e-6)
+
+
+def test_a_plateau_at_the_bound_is_charged_for_its_width_only():
+    """Flat near the bound and falling steeply further in (an overdamped second-order
+    actuator at zeta = 2 on a first-order lag): the factor is about the plateau's width
+    (0.1 of a span of 1.95), not the whole span a local slope would credit (the demo's
+    2500 Hz lag was otherwise taken for a second-order actuator with zeta unpaid for)."""
+    lo, hi = 0.05, 2.0
+    post = _Post(lambda t: -200.0 * max(hi - 0.1 - t, 0.0), lo, hi)
+    log_f, _ = bound_occam(post, np.array([hi, -7, -9, -3]), np.array([0]))
+    exact = 0.1 + quad(lambda t: np.exp(-200.0 * t), 0, hi - lo - 0.1)[0]
+    assert log_f <= np.log(exact) + 1e-9              # never more than the integral
+    assert log_f == pytest.approx(np.log(exact), abs=0.3)    # the grid errs low at the kink
+    assert log_f < np.log(1.95) - 2.5
