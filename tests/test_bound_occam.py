@@ -4,9 +4,10 @@ which the diagnosis' Bayes factor uses where the Laplace factor cannot be formed
 An overdamped second-order actuator fitted to a first-order lag sits at zeta's upper bound
 (2): before, its Bayes factor was -inf and a 324 Hz lag at both bearings of ROSS's test rig
 ended 'unexplained' (log posterior gain 2761 nats, docs/validation.md). The factor is the
-integral of the log posterior, linear in that parameter, over its prior's span: checked
-here against the numerical integral of a known log posterior, and at the null bound, where
-the Bayes factor can never exceed 1.
+integral of the posterior over the prior's span, on a log-spaced grid with the log
+posterior linear between its points: checked here against the numerical integral of known
+log posteriors (exact where linear, low at a kink), and at the null bound, where the Bayes
+factor can never exceed 1.
 """
 
 from __future__ import annotations
