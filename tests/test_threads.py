@@ -11,7 +11,7 @@ import numpy as np  # (also loads the BLAS library whose pools are checked)
 import pytest
 from threadpoolctl import threadpool_info, threadpool_limits
 
-from bayes_amb.cli.main import _threads_option, main
+from bayes_amb.cli.main import _global_words, main
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.threads import (
     BLAS_ENV_VARS,
@@ -96,7 +96,7 @@ def test_decorated_entry_points_run_single_threaded_and_restore(clean_env):
     (["params"], None),
 ])
 def test_threads_option_is_read_before_parsing(argv, value):
-    assert _threads_option(argv) == value
+    assert _global_words(argv)[0] == value
 
 
 def test_cli_rejects_a_bad_thread_count_in_one_line(clean_env, capsys):

@@ -67,29 +67,24 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     return parser
 
 
-def _command_of(argv: list[str]) -> str | None:
-    """The command named in argv (the first word after the global options), or None."""
-    skip = False
-    for arg in argv:
+def _global_words(argv: list[str]) -> tuple[str | None, str | None]:
+    """(the value of a global --threads N / --threads=N, the command): read before
+    anything imports numpy (BLAS reads its thread count then) and before the parser is
+    built (it builds the command's alone). Global options come before the command; the
+    first --threads counts."""
+    threads, skip = None, False
+    for i, arg in enumerate(argv):
         if skip:
             skip = False
         elif arg == "--threads":
             skip = True
+            if threads is None and i + 1 < len(argv):
+                threads = argv[i + 1]
+        elif arg.startswith("--threads="):
+            threads = arg.partition("=")[2] if threads is None else threads
         elif not arg.startswith("-"):
-            return arg
-    return None
-
-
-def _threads_option(argv: list[str]) -> str | None:
-    """The value of a global --threads N / --threads=N, read before anything imports numpy."""
-    for i, arg in enumerate(argv):
-        if arg == "--threads" and i + 1 < len(argv):
-            return argv[i + 1]
-        if arg.startswith("--threads="):
-            return arg.partition("=")[2]
-        if not arg.startswith("-"):
-            return None                       # the command: global options come before it
-    return None
+            return threads, arg
+    return threads, None
 
 
 def _swallowed_value(parser: argparse.ArgumentParser, args: argparse.Namespace
@@ -111,12 +106,13 @@ def _swallowed_value(parser: argparse.ArgumentParser, args: argparse.Namespace
 
 
 def main(argv: list[str] | None = None) -> int:
+    threads, command = _global_words(sys.argv[1:] if argv is None else argv)
     try:                                      # before the heavy imports (BLAS reads its env)
-        configure_process(_threads_option(sys.argv[1:] if argv is None else argv))
+        configure_process(threads)
     except BayesAmbError as exc:
         sys.stderr.write(f"bayes-amb: error: {exc}\n")
         return 2
-    parser = build_parser(_command_of(sys.argv[1:] if argv is None else argv))
+    parser = build_parser(command)
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:                 # a usage error (status 2), --help or --version

@@ -249,9 +249,10 @@ def bound_occam(post: LogPosterior, x: NDArray, idx: NDArray) -> tuple[float, ND
     away on one side only, and often not as a parabola (an overdamped second-order
     actuator fitted to a first-order lag: flat near zeta's bound, falling steeply far from
     it). Its factor is the integral of exp(lp - lp(x)) over the prior's span, inward from
-    the bound, by the trapezoid rule on BOUND_GRID (log-spaced shares of the span), with the
-    other parameters held at x: never more than the integral with them refitted, so the
-    Bayes factor errs low. The prior's density is already in lp. A span without an end (a
+    the bound, on BOUND_GRID (log-spaced shares of the span) with lp linear between its
+    points (_log_linear_integral: below the integral of a concave lp), and with the other
+    parameters held at x: never more than the integral with them refitted, so the Bayes
+    factor errs low. The prior's density is already in lp. A span without an end (a
     half-line prior) is integrated over ten times the parameter's size.
 
     Examples

@@ -34,6 +34,7 @@ from bayes_amb.discrepancy.model import ExtendedForwardModel
 from bayes_amb.discrepancy.select import (
     Screen,
     Selection,
+    _own_columns,
     posterior_log_odds,
     refine,
     screen,
@@ -98,11 +99,6 @@ def _refined(scores: list[dict[str, Any]], rnd: int) -> set[str]:
             if s["round"] == rnd and s.get("log_bayes_factor") is not None}
 
 
-def _n_own(fm: FittedModel) -> int:
-    own = fm.forward.slices[-1]
-    return own.stop - own.start
-
-
 def _alternatives(scores: list[dict[str, Any]], rnd: int, chosen: str) -> list[str]:
     """Keys of the other candidates of round ``rnd`` fitted fully there (a finite Bayes
     factor) or screened within SCREEN_SHARE of the choice."""
@@ -159,7 +155,8 @@ def revisit(sel: Selection, priors: dict[str, Prior] | None = None,
                                "instead_of": chosen.key, "chosen_log_bayes_factor":
                                float(chosen_bf) if np.isfinite(chosen_bf) else None})
             log.info("revisit %s: %s log BF %.1f against %.1f", chosen.key, a.key, bf, chosen_bf)
-            simpler = a.key in refined and _n_own(fm) <= _n_own(base)
+            simpler = (a.key in refined
+                       and _own_columns(fm.forward).size <= _own_columns(base.forward).size)
             if bf > max(best_bf, chosen_bf + (0.0 if simpler else SWAP_MARGIN)):
                 best, best_bf = fm, bf
         if best is None:
