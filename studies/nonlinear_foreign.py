@@ -38,18 +38,34 @@ from benchmarks.foreign import draw_case, write_case
 from benchmarks.foreign.benchmark import _controller_file
 
 BIAS_ERROR = 0.05
+SATURATION_ERROR = 0.05
 
 
-def with_bias(json_path: Path, bias: dict[str, float]) -> None:
+def _saturation_given(truth: dict[str, Any], bearings: list[str],
+                      rng: np.random.Generator) -> dict[str, float]:
+    """An iron saturation's ratio as the engineer's rig file gives it: the truth's times
+    (1 + e), e uniform in +-SATURATION_ERROR (none for an unsaturated law)."""
+    eff = {e["name"]: e["params"] for e in truth["effects"]}
+    if "iron_saturation" not in eff:
+        return {}
+    r = eff["iron_saturation"]["b_sat_ratio"]
+    return {b: r * (1 + rng.uniform(-SATURATION_ERROR, SATURATION_ERROR)) for b in bearings}
+
+
+def with_bias(json_path: Path, bias: dict[str, float],
+              saturation: dict[str, float] | None = None) -> None:
     """Write the reference rig with the bias current of the bearings whose magnets follow
-    the force law into the record's sidecar (a bearing without one is linear)."""
+    the force law into the record's sidecar (a bearing without one is linear), and their
+    iron's saturation ratio where ``saturation`` gives one."""
     side = json.loads(json_path.read_text())
     rig = load_rig("reference").to_dict()
     bt = rig["bearings"]
     ki, ks = bt.pop("ki"), bt.pop("ks")
     for b in "AB":
         bt[b] = {**bt[b], "ki": ki, "ks": ks, **({"bias_current": bias[b]} if b in bias
-                                                 else {})}
+                                                 else {}),
+                 **({"saturation_ratio": saturation[b]} if saturation and b in saturation
+                    else {})}
     side["rig"] = rig
     json_path.write_text(json.dumps(side, indent=1))
 
@@ -65,8 +81,9 @@ def score(d: Any, truth: dict[str, Any]) -> dict[str, Any]:
            "modelled": nl.name if nl else None, "inside": inside,
            "n_inside": sum(inside.values()), "wall_s": d.wall_s}
     eff = {e["name"]: e["params"] for e in truth["effects"]}
-    if nl is not None and nl.name == "magnet_force_law" and "magnet_force_law" in eff:
-        g = eff["magnet_force_law"]["gap_m"]
+    law = next((k for k in ("magnet_force_law", "iron_saturation") if k in eff), None)
+    if nl is not None and nl.name == "magnet_force_law" and law is not None:
+        g = eff[law]["gap_m"]
         row["gap"] = {b: [g, nl.estimate[b], *nl.hdi90[b]] for b in nl.where}
         row["gap_inside"] = all(lo <= g <= hi for _, _, lo, hi in row["gap"].values())
     if nl is not None and nl.name == "slew_limit" and "slew_limit" in eff:
@@ -161,6 +178,10 @@ def main() -> None:
     ap.add_argument("--out", required=True)
     ap.add_argument("--kinds", default="force_law=3,slew_limit=3,control=2,actuator_lag=2")
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--magnet-data", action="store_true",
+                    help="iron_saturation records get the bias current and the saturation "
+                         "ratio in their rig file (each within 5 %%), as an engineer who "
+                         "knows the magnet design writes them")
     ap.add_argument("--levels", default=None,
                     help="eta amplitudes (A), e.g. 0.15,0.3: each case recorded at every "
                          "level and diagnosed as several records (no bias in the rig file)")
@@ -187,12 +208,13 @@ def main() -> None:
             spec = draw_case(kind, rng, controller_file=str(ctrl))
             paths = write_case(spec, out, name, rng)
             truth = json.loads(paths["truth"].read_text())
-            if "force_law" in kind:
+            if "force_law" in kind or (a.magnet_data and "iron_saturation" in kind):
                 law = truth["draws"]["magnets"][0]
                 bearings = sorted({ax[0] for ax in law["axes"]})
                 with_bias(paths["json"], {b: law["i0_a"] * (1 + rng.uniform(-BIAS_ERROR,
                                                                             BIAS_ERROR))
-                                          for b in bearings})
+                                          for b in bearings},
+                          _saturation_given(truth, bearings, rng))
             t0 = time.perf_counter()
             d = diagnose(load_recording(paths["csv"]))
             row = {"name": name, "kind": kind, **score(d, truth),

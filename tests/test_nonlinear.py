@@ -190,10 +190,14 @@ def test_the_rig_files_bias_current_gives_the_force_law(rig):
 
 
 def test_the_simulator_plays_the_law_the_rig_file_states_and_diagnosis_models_it(rig):
-    """A rig file with bias_current: the product's simulator plays the force law (the
-    record differs from the linear rig's by about ks <(u/i0)^2> at the bearings), and the
-    nominal assessment models it from the same file, so its k_By covers the truth; the
-    shipped rigs state no bias (their magnets' constants do not turn the law on)."""
+    """A rig file with bias_current and, at bearing B, the iron's saturation_ratio: the
+    product's simulator plays the saturating law (the record differs from the linear
+    rig's), and the nominal assessment models it from the same file, so its k_By covers the
+    truth; read as linear, the same record passes the linearity check with k_By far off
+    (what one record cannot tell without the rig file). The shipped rigs state no bias
+    (their magnets' constants do not turn the law on)."""
+    import dataclasses
+
     from bayes_amb.control.export import export_controller, reference_controller
     from bayes_amb.discrepancy.adequacy import nominal_assessment
     from bayes_amb.rig.force_law import rig_gaps
@@ -201,21 +205,79 @@ def test_the_simulator_plays_the_law_the_rig_file_states_and_diagnosis_models_it
     from bayes_amb.simulate import SimulationConfig, simulate_recording
     assert rig_gaps(rig) == {} and rig_gaps(load_rig("ross_test_rig")) == {}
     d = rig.to_dict()
-    d["bearings"]["bias_current"] = 1.0                       # 0.3 A rms: ks reads ~9 % high
-    biased = rig_from_dict(d)
+    bt = d["bearings"]
+    ki, ks = bt.pop("ki"), bt.pop("ks")
+    bt["A"] = {**bt["A"], "ki": ki, "ks": ks}
+    bt["B"] = {**bt["B"], "ki": ki, "ks": ks, "bias_current": 2.0, "saturation_ratio": 1.5}
+    saturating = rig_from_dict(d)
     ctrl = export_controller(reference_controller(rig, 1e-4), rig)
     cfg = SimulationConfig(truth="reduced", params={"k_By": 0.1}, amplitude=0.3,
                            duration=0.5, dt=1e-4, noise_rms=5e-8, seed=3)
-    rec, _ = simulate_recording(biased, ctrl, cfg)
+    rec, _ = simulate_recording(saturating, ctrl, cfg)
     lin, _ = simulate_recording(rig, ctrl, cfg)
     assert np.max(np.abs(np.asarray(rec.y) - np.asarray(lin.y))) > 1e-3 * np.max(
         np.abs(np.asarray(lin.y)))
     checks, fit, _ = nominal_assessment(rec, ("k_By",))
     line = next(c for c in checks.checks if c.name == "linearity")
     assert line.ok and line.values["modelled"] == "rig_force_law"
+    assert line.values["nonlinearity"]["saturation"] == {"B": 1.5}
     sd = float(np.sqrt(fit.cov[0, 0] + fit.extra_cov[0, 0]))
     assert abs(fit.params[0] - 0.1) < 4 * sd
-    # the same record read without the bias: the law is a stiffness change, k_By far off
-    import dataclasses
-    _, blind, _ = nominal_assessment(dataclasses.replace(rec, rig=rig), ("k_By",))
+    checks, blind, _ = nominal_assessment(dataclasses.replace(rec, rig=rig), ("k_By",))
+    assert next(c for c in checks.checks if c.name == "linearity").ok
     assert abs(blind.params[0] - 0.1) > 4 * float(np.sqrt(blind.cov[0, 0]))
+
+
+def test_a_saturating_magnet_keeps_the_rig_slopes_and_softens(rig):
+    """saturation_ratio r: the law's linearisation stays ki and ks (d is third order in
+    small signals), it takes force away from large currents (d opposes u at the centre,
+    and odd in u there), and it tends to the unsaturated law as r grows."""
+    from bayes_amb.rig.force_law import law_current
+    rng = np.random.default_rng(1)
+    g0 = 4e-4
+    i0 = rig.magnets["A"].ks / rig.magnets["A"].ki * g0
+    gaps = {"A": g0, "B": g0}
+    u = i0 * rng.standard_normal((500, 4))
+    x = g0 * rng.standard_normal((500, 4))
+    for scale in (1e-2, 1e-3):                      # cubic: d / u falls as scale^2
+        d = law_current(rig, scale * 0.1 * u, scale * 0.1 * x, gaps, {"A": 1.5, "B": 1.5})
+        assert np.max(np.abs(d)) < 10 * scale ** 2 * np.max(np.abs(scale * 0.1 * u))
+    big = np.linspace(-0.5, 0.5, 11)[:, None] * i0 * np.ones((1, 4))
+    zero = np.zeros_like(big)
+    d = law_current(rig, big, zero, gaps, {"A": 1.5, "B": 1.5})
+    assert np.all(d[big > 0] < 0) and np.all(d[big < 0] > 0)      # softening
+    np.testing.assert_allclose(d, -d[::-1], atol=1e-15)            # odd in u
+    plain = law_current(rig, 0.2 * u, 0.01 * x, gaps, {})
+    far = law_current(rig, 0.2 * u, 0.01 * x, gaps, {"A": 1e4, "B": 1e4})
+    np.testing.assert_allclose(far, plain, atol=1e-6 * np.max(np.abs(0.2 * u)))
+
+
+def test_the_rig_files_saturation_ratio_saturates_the_law(rig):
+    """bearings.saturation_ratio beside bias_current: read, written back, carried by the
+    rig's force law with its own 5 % sd (two more refits), and refused without a bias or
+    at or below 1, naming the field."""
+    from bayes_amb.discrepancy.nonlinear import SATURATION_REL_SD, rig_force_law
+    from bayes_amb.errors import BayesAmbError
+    from bayes_amb.rig.rig import rig_from_dict
+    d = rig.to_dict()
+    d["bearings"]["B"] = {**d["bearings"]["B"], "ki": rig.ki, "ks": rig.ks,
+                          "bias_current": 1.6, "saturation_ratio": 1.8}
+    d["bearings"]["A"] = {**d["bearings"]["A"], "ki": rig.ki, "ks": rig.ks}
+    del d["bearings"]["ki"], d["bearings"]["ks"]
+    sat = rig_from_dict(d)
+    assert sat.magnets["B"].saturation == 1.8 and sat.magnets["A"].saturation is None
+    assert rig_from_dict(sat.to_dict()) == sat
+    law = rig_force_law(sat)
+    assert law.where == ("B",) and law.saturation == {"B": 1.8}
+    assert "saturating at 1.8 times the bias flux density" in law.text()
+    ends = law.saturation_ends()
+    assert [e["B"] for e in ends] == pytest.approx([1.8 * (1 - SATURATION_REL_SD),
+                                                    1.8 * (1 + SATURATION_REL_SD)])
+    assert law.to_dict()["saturation"] == {"B": 1.8}
+    d["bearings"]["B"]["saturation_ratio"] = 0.9
+    with pytest.raises(BayesAmbError, match=r"bearings\.B\.saturation_ratio.*not above 1"):
+        rig_from_dict(d)
+    del d["bearings"]["B"]["bias_current"]
+    d["bearings"]["B"]["saturation_ratio"] = 1.8
+    with pytest.raises(BayesAmbError, match=r"bearings\.B\.saturation_ratio.*bias_current"):
+        rig_from_dict(d)

@@ -21,18 +21,21 @@ from bayes_amb.discrepancy.nonlinear import (
     centred,
 )
 from bayes_amb.rig import Rig
+from bayes_amb.rig.force_law import law_current
 
 UNITS = {"gap_m": "m", "slew_a_per_s": "A/s", "limit_a": "A"}
 
 
 def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
                        coefficients: dict[str, dict[str, Any]],
-                       recorded_u: NDArray | None = None) -> dict[str, Any] | None:
+                       recorded_u: NDArray | None = None,
+                       shift: dict[str, float] | None = None) -> dict[str, Any] | None:
     """The diagnosis' nonlinearity block from the linearity check's values (None when no
     nonlinearity was modelled): the parameter per location with its 90 % interval and the
     amplitude answer. coefficients: the reported bearing coefficients (theta summaries);
     recorded_u: the currents as recorded (a coil current's flat tops, before the offsets
-    check's detrending tilts them; default u)."""
+    check's detrending tilts them; default u); shift: how far modelling the nonlinearity
+    moved each coefficient (a saturating magnet's linear range is read from it)."""
     modelled = values.get("modelled")
     if modelled is None:
         return None
@@ -41,7 +44,8 @@ def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
         n = values["nonlinearity"]
         block = {"name": n["name"], "title": TITLES[n["name"]], "where": n["where"],
                  "parameter": n["parameter"], "unit": UNITS[n["parameter"]],
-                 "estimate": n["estimate"], "hdi90": n["interval90"], "z": n["z"]}
+                 "estimate": n["estimate"], "hdi90": n["interval90"], "z": n["z"],
+                 **({"saturation": n["saturation"]} if n.get("saturation") else {})}
     elif modelled == "command":
         lim = values["clipping_limit_a"]
         block = {"name": "current_limit", "title": TITLES["current_limit"],
@@ -52,7 +56,7 @@ def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
     else:                                           # a recorded coil current held at a limit
         return _coil_limit(np.asarray(u if recorded_u is None else recorded_u, dtype=float))
     block["linear_range"], block["derived"] = _amplitude_answer(block, rig, u, dt,
-                                                                 coefficients)
+                                                                 coefficients, shift or {})
     return block
 
 
@@ -91,8 +95,55 @@ def _half_width(coefficients: dict[str, dict[str, Any]], bearing: str) -> float 
     return float(np.median(hw)) if hw else None
 
 
+def _saturated_answer(rig: Rig, u: NDArray, b: str, gap: float, ratio: float,
+                      coefficients: dict[str, dict[str, Any]],
+                      shift: dict[str, float]) -> tuple[str, dict]:
+    """A saturating magnet's amplitude answer. Its static shifts at this record's currents
+    (the law's defect regressed on the current at the centre: ki; its slope in x: ks) are
+    small, but in the loop the softening acts on the controller's feedback as well as on
+    the excitation, and a linear fit moves the bearing's coefficients by much more: how
+    far modelling the law moved them (``shift``) is the answer, and as each shift grows
+    with the current squared, the linear range is the rms current below which the largest
+    stays inside its interval."""
+    j = "AB".index(b)
+    sl = slice(2 * j, 2 * j + 2)
+    ub = u[:, sl]
+    rho = float(np.mean(bias_per_gap(rig)[sl]))
+    i0 = rho * gap
+    zero = np.zeros_like(u)
+    d0 = law_current(rig, u, zero, {b: gap}, {b: ratio})[:, sl]
+    d1 = law_current(rig, u, zero + 1e-4 * gap, {b: gap}, {b: ratio})[:, sl]
+    ki_shift = float(np.sum(d0 * ub) / np.sum(ub * ub))
+    ks_shift = float(np.mean((d1 - d0) / (1e-4 * gap))) / rho      # d in A; ks / ki = rho
+    rms = float(np.sqrt(np.mean(ub ** 2)))
+    moved = {n: -v for n, v in shift.items() if n[2:3] == b and n in coefficients}
+    worst, ratio_hw = None, 0.0
+    for n, v in moved.items():
+        lo, hi = coefficients[n]["hdi90"]
+        r = abs(v) / max(0.5 * (hi - lo), 1e-12)
+        if r > ratio_hw:
+            worst, ratio_hw = n, r
+    i_max = rms / np.sqrt(ratio_hw) if ratio_hw > 0 else None
+    derived = {"bias_current_a": i0, "saturation_ratio": ratio, "rms_current_a": rms,
+               "ki_shift_relative": ki_shift, "ks_shift_relative": ks_shift,
+               "ks_shift_n_per_m": ks_shift * rig.magnets[b].ks,
+               "linear_fit_offset": moved,
+               "linear_rms_current_a": None if i_max is None else float(i_max)}
+    line = (f"bearing {b}: bias {i0:.3g} A, the iron saturating at {ratio:.3g} times the "
+            f"bias flux density; at this record's {rms:.3g} A rms its ki is {100 * ki_shift:+.2g}"
+            f" % and its ks {100 * ks_shift:+.2g} % from the small-signal values")
+    if worst is not None:
+        v = moved[worst]
+        line += (f", and a linear fit reads {worst} {abs(v):.3g} {'lower' if v < 0 else 'higher'}"
+                 f" ({ratio_hw:.2g} times its 90 % half-width); the linearisation holds within "
+                 f"the intervals below {i_max:.3g} A rms (an excitation scaled by "
+                 f"{min(1.0, i_max / rms):.2g} or less)")
+    return line, derived
+
+
 def _amplitude_answer(block: dict[str, Any], rig: Rig, u: NDArray, dt: float,
-                      coefficients: dict[str, dict[str, Any]]) -> tuple[str, dict]:
+                      coefficients: dict[str, dict[str, Any]],
+                      shift: dict[str, float]) -> tuple[str, dict]:
     """Where the linearisation holds: the force law's stiffness shift a linear fit makes
     at this record's current, and the rms current below which it stays inside the
     stiffness intervals; the slew limit's largest step per sample; the current limit's
@@ -100,7 +151,13 @@ def _amplitude_answer(block: dict[str, Any], rig: Rig, u: NDArray, dt: float,
     if block["name"] == FORCE_LAW:
         rhos = bias_per_gap(rig)
         parts, derived = [], {}
+        saturation = block.get("saturation") or {}
         for b in block["where"]:
+            if b in saturation:
+                line, derived[b] = _saturated_answer(rig, u, b, block["estimate"][b],
+                                                     saturation[b], coefficients, shift)
+                parts.append(line)
+                continue
             j = "AB".index(b)
             sl = slice(2 * j, 2 * j + 2)
             i0 = float(np.mean(rhos[sl]) * block["estimate"][b])

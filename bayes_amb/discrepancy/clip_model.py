@@ -32,6 +32,7 @@ from bayes_amb.discrepancy.linearity import (
 )
 from bayes_amb.discrepancy.loop_model import model_loop
 from bayes_amb.discrepancy.nonlinear import (
+    FORCE_LAW,
     LOOP,
     RIG_FORCE_LAW,
     SLEW,
@@ -97,9 +98,18 @@ def take_in_clipping(recording: Recording, names: tuple[str, ...],
                 *screen(nominal.like, nominal.params, nominal.log10_sigma, checks.u,
                         checks.y, recording.rig, reg=reg),
                 loop_screen(reg, checks.u, recording.dt)]))
-            if screened[0].found:
+            law = rig_force_law(recording.rig)
+            if screened[0].found and screened[0].name == FORCE_LAW and law is not None:
+                # the record shows the law the rig file gives: the file's law (its bias
+                # and the iron's saturation, at every bearing it names) is modelled, not
+                # the screen's profile of the plain law at the bearings it flagged
+                found = replace(law, found=True, z=screened[0].z,
+                                z_linear_free=screened[0].z_linear_free,
+                                z_crit=screened[0].z_crit)
+                screened = (found, *screened[1:])
+            elif screened[0].found:
                 found = screened[0]
-            elif (law := rig_force_law(recording.rig)) is not None:
+            elif law is not None:
                 found = law
                 screened = (law, *screened)
     raw = nominal.params.copy()
@@ -250,6 +260,14 @@ def _parameter_spread(recording: Recording, names: tuple[str, ...],
             recording, names, priors, seed, checks, eps, fitted,
             found.defect(recording.rig, checks.u, checks.y, recording.dt, at=at)), fitted)
             for at in (lo, hi)]
+        half = 0.5 * (pair[1] - pair[0])
+        cov += np.outer(half, half)
+    sat_ends = found.saturation_ends()
+    for lo, hi in zip(sat_ends[::2], sat_ends[1::2], strict=True):
+        pair = [_params_of(_fit_taking_out(
+            recording, names, priors, seed, checks, eps, fitted,
+            found.defect(recording.rig, checks.u, checks.y, recording.dt, saturation=at)),
+            fitted) for at in (lo, hi)]
         half = 0.5 * (pair[1] - pair[0])
         cov += np.outer(half, half)
     if found.name == SLEW:

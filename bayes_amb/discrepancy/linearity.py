@@ -395,6 +395,11 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
                                 "estimated with the law modelled at the estimated gap "
                                 "(a smaller excitation keeps the currents nearer the "
                                 "linearisation)",
+            "rig_force_law": "the magnets' force law the rig file gives (its bias "
+                             "current, and its iron's saturation where stated): no linear "
+                             "physics is named, and the coefficients are estimated with "
+                             "that law modelled (a smaller excitation keeps the currents "
+                             "nearer the linearisation)",
             "slew_limit": "the amplifier's slew-rate limit: no linear physics is named, "
                           "and the coefficients are estimated with the limit modelled "
                           "(a smaller excitation, or one with fewer fast steps, keeps "
@@ -427,5 +432,6 @@ def unknown_bias_line(rec: Recording, fitted: Any) -> str:
     return (f"the stiffnesses are read at this record's {rms:.3g} A rms current: they are "
             f"the small-signal ones within their intervals if the magnets' bias current "
             f"exceeds {rms / np.sqrt(half):.3g} A (the force law reads ks (1 + "
-            "<(i/i0)^2>); give bearings.bias_current in the rig file to model it, or "
-            "diagnose records at two excitation levels)")
+            "<(i/i0)^2>), and a saturating iron softens them; give bearings.bias_current "
+            "(and saturation_ratio) in the rig file to model it, or diagnose records at "
+            "two excitation levels)")

@@ -57,6 +57,7 @@ from bayes_amb.rig.force_law import (
     bias_per_gap,
     law_current,
     rig_gaps,
+    rig_saturation,
 )
 
 FORCE_LAW = "magnet_force_law"
@@ -117,11 +118,13 @@ def force_law_regressors(rig: Rig, u: NDArray, x: NDArray) -> dict[str, NDArray]
     return out
 
 
-def force_law_defect(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float]) -> NDArray:
+def force_law_defect(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float],
+                     saturation: dict[str, float] | None = None) -> NDArray:
     """d = (f - ki i - ks x) / ki (N, 4) of the exact differential law, per bearing gap
     (m; a bearing not in ``gaps`` is linear), for the record's currents and displacements
-    about their medians (rig.force_law.law_current)."""
-    return law_current(rig, centred(u), centred(x), gaps)
+    about their medians (rig.force_law.law_current; the iron saturating at the rig file's
+    ratios unless ``saturation`` gives others)."""
+    return law_current(rig, centred(u), centred(x), gaps, saturation)
 
 
 def slew_defect(u: NDArray, rate: float, dt: float, first_moment: bool = True) -> NDArray:
@@ -200,17 +203,22 @@ class Nonlinearity:
     gain_sd: float = 0.0
     rss_drop: float = 0.0
     source: str = "record"
+    saturation: dict[str, float] = field(default_factory=dict)
+    """The force law's iron saturation ratio per bearing where the rig file gives one."""
 
     @property
     def title(self) -> str:
         return TITLES[self.name]
 
     def defect(self, rig: Rig, u: NDArray, y: NDArray, dt: float,
-               at: dict[str, float] | None = None) -> NDArray:
-        """The current defect d (N, 4) at the estimate (or at ``at``)."""
+               at: dict[str, float] | None = None,
+               saturation: dict[str, float] | None = None) -> NDArray:
+        """The current defect d (N, 4) at the estimate (or at ``at``; the force law's
+        saturation ratios at ``saturation`` instead of its own)."""
         v = self.estimate if at is None else at
         if self.name == FORCE_LAW:
-            return force_law_defect(rig, u, actuator_displacement(rig, y), v)
+            sat = saturation if saturation is not None else (self.saturation or None)
+            return force_law_defect(rig, u, actuator_displacement(rig, y), v, sat)
         return slew_defect(u, v["all"], dt)
 
     def ends(self) -> list[dict[str, float]]:
@@ -225,6 +233,16 @@ class Nonlinearity:
                 out.append(v)
         return out
 
+    def saturation_ends(self) -> list[dict[str, float]]:
+        """The saturation ratios with one bearing's SATURATION_REL_SD below and above it,
+        in turn (the refits that carry the ratio's uncertainty into the coefficients)."""
+        out = []
+        for b, r in self.saturation.items():
+            for s in (-1.0, 1.0):
+                out.append({**self.saturation, b: max(r * (1.0 + s * SATURATION_REL_SD),
+                                                       1.0 + 1e-6)})
+        return out
+
     def text(self) -> str:
         """One phrase: what, where, the parameter with its interval."""
         if self.name == LOOP:
@@ -236,11 +254,15 @@ class Nonlinearity:
         for loc in self.where:
             e, (lo, hi) = self.estimate[loc], self.interval90[loc]
             if self.name == FORCE_LAW:
+                sat = (f", the iron saturating at {self.saturation[loc]:.3g} times the bias "
+                       "flux density" if loc in self.saturation else "")
                 parts.append(f"bearing {loc}: gap {1e3 * e:.3g} mm (90 % {1e3 * lo:.3g} .. "
-                             f"{1e3 * hi:.3g} mm)")
+                             f"{1e3 * hi:.3g} mm){sat}")
             else:
                 parts.append(f"{e:.4g} A/s (90 % {lo:.4g} .. {hi:.4g})")
-        src = " (from the rig file's bias current)" if self.source == "rig file" else ""
+        src = ((" (from the rig file's bias current and saturation ratio)" if self.saturation
+                else " (from the rig file's bias current)") if self.source == "rig file"
+               else "")
         return f"{self.title}{src}: " + "; ".join(parts)
 
     def to_dict(self) -> dict[str, Any]:
@@ -250,12 +272,16 @@ class Nonlinearity:
                 "estimate": dict(self.estimate),
                 "interval90": {k: list(v) for k, v in self.interval90.items()},
                 "gain": self.gain, "gain_sd": self.gain_sd, "rss_drop": self.rss_drop,
-                "source": self.source}
+                "source": self.source,
+                **({"saturation": dict(self.saturation)} if self.saturation else {})}
 
 
 BIAS_REL_SD = 0.05
 """Relative sd of a bias current the rig file gives (a design value: the amplifiers' bias
 setting and the gap's machining tolerance)."""
+SATURATION_REL_SD = 0.05
+"""Relative sd of a saturation ratio the rig file gives (the iron's saturation flux
+density from its data sheet over the design's bias flux density)."""
 
 
 def rig_force_law(rig: Rig) -> Nonlinearity | None:
@@ -272,7 +298,7 @@ def rig_force_law(rig: Rig) -> Nonlinearity | None:
     return Nonlinearity(FORCE_LAW, False, 0.0, 0.0, 0.0, where=tuple(where),
                         parameter="gap_m", estimate=gaps,
                         interval90={b: (g * (1 - k), g * (1 + k)) for b, g in gaps.items()},
-                        source="rig file")
+                        source="rig file", saturation=rig_saturation(rig))
 
 
 def rss_fn(reg: Regression, wt: NDArray) -> Callable[[NDArray], float]:

@@ -34,13 +34,27 @@ def actuator_displacement(rig: Rig, y: NDArray) -> NDArray:
     return out
 
 
-def law_current(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float]) -> NDArray:
+def saturated(v: NDArray, r: float | None) -> NDArray:
+    """The flux density over the bias one, T(v) = r tanh(v / r), for an unsaturated v
+    (v itself when r is None: linear iron).
+
+    >>> float(saturated(np.array(1.0), None)), round(float(saturated(np.array(10.0), 2.0)), 6)
+    (1.0, 2.0)
+    """
+    return v if r is None else r * np.tanh(v / r)
+
+
+def law_current(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float],
+                saturation: dict[str, float] | None = None) -> NDArray:
     """d (N, 4) for currents u and actuator displacements x about the magnets' centre, per
-    bearing gap (m; a bearing not in ``gaps`` is linear). Where |x| reaches the gap the
-    law is that of 0.99 of it (the rotor on its catcher is not this law's business)."""
+    bearing gap (m; a bearing not in ``gaps`` is linear). The iron saturates where
+    ``saturation`` (default: the rig file's ratios) gives a bearing its ratio r (module
+    docstring). Where |x| reaches the gap the law is that of 0.99 of it (the rotor on its
+    catcher is not this law's business)."""
     u = np.atleast_2d(np.asarray(u, dtype=float))
     x = np.atleast_2d(np.asarray(x, dtype=float))
     rho = bias_per_gap(rig)
+    sat = rig_saturation(rig) if saturation is None else saturation
     d = np.zeros_like(u)
     for j, b in enumerate("AB"):
         if b not in gaps:
@@ -49,9 +63,20 @@ def law_current(rig: Rig, u: NDArray, x: NDArray, gaps: dict[str, float]) -> NDA
         g0 = float(gaps[b])
         i0 = rho[sl] * g0
         io, xi = u[:, sl] / i0, np.clip(x[:, sl] / g0, -0.99, 0.99)
-        law = (1 + io) ** 2 / (1 - xi) ** 2 - (1 - io) ** 2 / (1 + xi) ** 2
+        r = sat.get(b)
+        if r is None:
+            law = (1 + io) ** 2 / (1 - xi) ** 2 - (1 - io) ** 2 / (1 + xi) ** 2
+        else:
+            law = (saturated((1 + io) / (1 - xi), r) ** 2
+                   - saturated((1 - io) / (1 + xi), r) ** 2) / (
+                       r * np.tanh(1.0 / r) / np.cosh(1.0 / r) ** 2)
         d[:, sl] = i0 / 4.0 * (law - 4 * io - 4 * xi)
     return d
+
+
+def rig_saturation(rig: Rig) -> dict[str, float]:
+    """The saturation ratio r of the bearings whose rig file gives one (beside the bias)."""
+    return {b: m.saturation for b, m in rig.magnets.items() if m.saturation is not None}
 
 
 def rig_gaps(rig: Rig) -> dict[str, float]:

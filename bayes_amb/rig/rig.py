@@ -52,6 +52,8 @@ MAGNET_KEYS = {"gap": "nominal air gap g0 (m)", "bias_current": "bias current i0
                "pole_area": "pole face area (m^2)", "turns": "turns per coil",
                "pole_angle": "angle of a pole to the bearing's axis (rad)"}
 """The constants of a radial AMB magnet from which ki and ks follow (:func:`magnet_constants`)."""
+LAW_KEYS = ("bias_current", "saturation_ratio")
+"""The force-law keys a rig file may give beside ki and ks (rig/force_law.py)."""
 
 
 def magnet_constants(gap: float, bias_current: float, pole_area: float, turns: float,
@@ -81,6 +83,9 @@ class Magnet:
     ks: float
     constants: tuple[tuple[str, float], ...] = ()
     bias: float | None = None
+    saturation: float | None = None
+    """The iron's saturation flux density over the bias flux density (``saturation_ratio``
+    beside ``bias_current``): the force law then saturates (rig/force_law.py)."""
 
     @property
     def bias_current(self) -> float | None:
@@ -198,19 +203,23 @@ class Rig:
         (the shorthand), else per bearing (its magnet's constants where it was given so)."""
         mags = self.magnets
         shared = (all(not m.constants for m in mags.values())
-                  and len({(m.ki, m.ks, m.bias) for m in mags.values()}) == 1)
+                  and len({(m.ki, m.ks, m.bias, m.saturation) for m in mags.values()}) == 1)
         if shared:
             m = next(iter(mags.values()))
-            return {"ki": m.ki, "ks": m.ks,
-                    **({} if m.bias is None else {"bias_current": m.bias}),
+            return {"ki": m.ki, "ks": m.ks, **_law_keys(m),
                     **{k: {"node": v} for k, v in self.bearing_nodes.items()}}
         out: dict[str, Any] = {}
         for b, node in self.bearing_nodes.items():
             m = mags[b]
             out[b] = ({"node": node, "magnet": dict(m.constants)} if m.constants
-                      else {"node": node, "ki": m.ki, "ks": m.ks,
-                            **({} if m.bias is None else {"bias_current": m.bias})})
+                      else {"node": node, "ki": m.ki, "ks": m.ks, **_law_keys(m)})
         return out
+
+
+def _law_keys(m: Magnet) -> dict[str, float]:
+    """A magnet's force-law keys as the rig file has them (none for a linear magnet)."""
+    return {**({} if m.bias is None else {"bias_current": m.bias}),
+            **({} if m.saturation is None else {"saturation_ratio": m.saturation})}
 
 
 SHIPPED_RIGS = ("reference", "small_rotor", "ross_test_rig")
@@ -260,13 +269,13 @@ def rig_from_dict(data: dict[str, Any], source: str = "<dict>") -> Rig:
             id=r.number(d, "id", f"{f}.id", nonneg=True),
         ))
     r.unique_names([d.name for d in discs], "discs", "disc")
-    bt = r.table(data, "bearings", "bearings", {"ki", "ks", "bias_current", "A", "B"})
+    bt = r.table(data, "bearings", "bearings", {"ki", "ks", *LAW_KEYS, "A", "B"})
     bearing_nodes = {}
     sensor_nodes = {}
     magnets = {}
     st = r.table(data, "sensors", "sensors", {"A", "B"})
     for b in ("A", "B"):
-        tb = r.table(bt, b, f"bearings.{b}", {"node", "ki", "ks", "bias_current", "magnet"})
+        tb = r.table(bt, b, f"bearings.{b}", {"node", "ki", "ks", *LAW_KEYS, "magnet"})
         bearing_nodes[b] = r.node(tb, "node", f"bearings.{b}.node", n_nodes)
         magnets[b] = _magnet(r, bt, tb, b)
         sensor_nodes[b] = r.node(r.table(st, b, f"sensors.{b}", {"node"}), "node",
@@ -317,7 +326,7 @@ def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:
     table's shared ki and ks."""
     f = f"bearings.{b}"
     if "magnet" in tb:
-        if "ki" in tb or "ks" in tb or "bias_current" in tb:
+        if "ki" in tb or "ks" in tb or any(k in tb for k in LAW_KEYS):
             raise r.fail(f"{f}.magnet", "give ki and ks (and bias_current) or the magnet's "
                          "constants, not both")
         mt = r.table(tb, "magnet", f"{f}.magnet", set(MAGNET_KEYS))
@@ -330,8 +339,19 @@ def _magnet(r: Any, bt: dict, tb: dict, b: str) -> Magnet:
     bsrc, bwhere = (tb, f) if "bias_current" in tb else (bt, "bearings")
     bias = (r.number(bsrc, "bias_current", f"{bwhere}.bias_current")
             if "bias_current" in bsrc else None)
+    ssrc, swhere = (tb, f) if "saturation_ratio" in tb else (bt, "bearings")
+    saturation = None
+    if "saturation_ratio" in ssrc:
+        key = f"{swhere}.saturation_ratio"
+        saturation = r.number(ssrc, "saturation_ratio", key)
+        if bias is None:
+            raise r.fail(key, "a saturation ratio needs the magnets' bias_current beside it")
+        if not saturation > 1.0:
+            raise r.fail(key, f"{saturation} is not above 1 (the bias flux density would "
+                         "already be past saturation)")
     return Magnet(ki=r.number(src, "ki", f"{where}.ki"),
-                  ks=r.number(src, "ks", f"{where}.ks", nonneg=True), bias=bias)
+                  ks=r.number(src, "ks", f"{where}.ks", nonneg=True), bias=bias,
+                  saturation=saturation)
 
 
 LIMIT_KEYS = {"current_a": "the largest control current the amplifiers deliver, |u| (A)",
