@@ -303,6 +303,20 @@ def test_a_light_command_does_not_import_the_heavy_libraries():
     assert out.stdout.strip().splitlines()[-1] == "0 False False", out.stdout + out.stderr
 
 
+def test_the_overview_is_the_whole_parsers_help_without_its_imports():
+    """`bayes-amb --help` (and no command, or an unknown one) builds the overview from
+    COMMAND_HELP: the same text as the parser of every command, and no command module,
+    python-control or ArviZ imported."""
+    from bayes_amb.cli.main import overview_parser
+    assert overview_parser().format_help() == build_parser().format_help()
+    code = ("import sys; from bayes_amb.cli.main import main; rc = main(['--help']); "
+            "print(rc, 'control' in sys.modules, 'arviz' in sys.modules, "
+            "any(m.endswith('_cmd') for m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert out.stdout.strip().splitlines()[-1] == "0 False False False", out.stdout + out.stderr
+
+
 @pytest.mark.parametrize("argv", [["--help"], ["answers", "--help"], ["rig", "--help"]])
 def test_help_exits_zero(argv, capsys):
     assert main(argv) == 0

@@ -10,6 +10,7 @@ import argparse
 import logging
 import re
 import sys
+from typing import Any
 
 from bayes_amb import __version__
 from bayes_amb.compile_notice import install as install_compile_notice
@@ -49,11 +50,33 @@ COMMAND_MODULES = {
 ArviZ, matplotlib: seconds), so a run builds only its own command's parser."""
 
 
-def build_parser(command: str | None = None) -> argparse.ArgumentParser:
-    """The parser of every command, or of ``command`` alone (a name of COMMAND_MODULES):
-    the same options, without importing the other commands' modules."""
-    import importlib
+COMMAND_HELP = {
+    "model": "build the FE rotor model and its reduction; summarise",
+    "params": "list the uncertain-parameter names",
+    "controller": "design and export the reference controller",
+    "simulate": "simulate a closed-loop recording",
+    "identify": "identify parameters from a recording",
+    "study": "run a sensitivity or calibration study",
+    "bench": "run the benchmarks (ratios against baselines)",
+    "diagnose": "locate and explain model discrepancy",
+    "library": "list the candidate physics of the diagnosis",
+    "report": "write an HTML and a PDF report of a run",
+    "demo": "run the end-to-end demonstration and write a report",
+    "import": "import a DAQ recording (.mat, TDMS, HDF5, CSV)",
+    "import-controller": "import a MATLAB state-space or transfer-function controller "
+                         "(.mat) as a controller file",
+    "rig": "rig files: convert from ROSS",
+    "answers": "bearing ks and c, closed-loop modes, log decrements, API 617 margins, "
+               "ISO 14839-3 peak sensitivity, with 90%% intervals",
+    "plan": "predict what a test will tell before it is run",
+    "compare": "how much each coefficient changed between two runs, and the probability "
+               "that it changed",
+}
+"""Each command's one line in ``bayes-amb --help`` (the same as its module registers; a
+test holds them equal), so that the overview imports no command's module."""
 
+
+def _global_parser() -> tuple[argparse.ArgumentParser, Any]:
     parser = _OneLineParser(prog="bayes-amb", description="Bayesian closed-loop "
                             "identification of rotors on active magnetic bearings.")
     parser.add_argument("--version", action="version", version=f"bayes-amb {__version__}")
@@ -61,9 +84,28 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
     parser.add_argument("--threads", metavar="N", help="BLAS/OpenMP threads (default: "
                         f"${THREADS_ENV} or 1; 0 keeps the libraries' own default)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_OneLineParser)
+    return parser, sub
+
+
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or of ``command`` alone (a name of COMMAND_MODULES):
+    the same options, without importing the other commands' modules."""
+    import importlib
+
+    parser, sub = _global_parser()
     names = (COMMAND_MODULES[command],) if command in COMMAND_MODULES else COMMAND_MODULES.values()
     for name in dict.fromkeys(names):
         importlib.import_module(f"bayes_amb.cli.{name}").add_parser(sub)
+    return parser
+
+
+def overview_parser() -> argparse.ArgumentParser:
+    """The parser without a known command (``bayes-amb``, ``bayes-amb --help``, an unknown
+    command): the global options and each command's one line, no command module imported
+    (building every command's parser imports python-control and ArviZ, about 3 s)."""
+    parser, sub = _global_parser()
+    for name, text in COMMAND_HELP.items():
+        sub.add_parser(name, help=text)
     return parser
 
 
@@ -112,7 +154,7 @@ def main(argv: list[str] | None = None) -> int:
     except BayesAmbError as exc:
         sys.stderr.write(f"bayes-amb: error: {exc}\n")
         return 2
-    parser = build_parser(command)
+    parser = build_parser(command) if command in COMMAND_MODULES else overview_parser()
     try:
         args = parser.parse_args(argv)
     except SystemExit as exc:                 # a usage error (status 2), --help or --version
