@@ -23,6 +23,18 @@ def rig():
     return load_rig()
 
 
+def _saturating_at_b(rig, bias: float = 2.0, ratio: float = 1.5):
+    """The reference rig with bearing B's magnets given a bias current and an iron that
+    saturates at ``ratio`` times the bias flux density (A linear)."""
+    from bayes_amb.rig.rig import rig_from_dict
+    d = rig.to_dict()
+    bt = d["bearings"]
+    ki, ks = bt.pop("ki"), bt.pop("ks")
+    bt["A"] = {**bt["A"], "ki": ki, "ks": ks}
+    bt["B"] = {**bt["B"], "ki": ki, "ks": ks, "bias_current": bias, "saturation_ratio": ratio}
+    return rig_from_dict(d)
+
+
 def test_force_law_defect_is_the_cubic_expansion_for_small_signals(rig):
     """d = N / ki with N = F0 (4 xi iota^2 + 12 iota xi^2 + 8 xi^3) + O(5th order), i.e.
     d = (x u^2 / rho + 3 u x^2 + 2 rho x^3) / g0^2 (module docstring)."""
@@ -201,15 +213,9 @@ def test_the_simulator_plays_the_law_the_rig_file_states_and_diagnosis_models_it
     from bayes_amb.control.export import export_controller, reference_controller
     from bayes_amb.discrepancy.adequacy import nominal_assessment
     from bayes_amb.rig.force_law import rig_gaps
-    from bayes_amb.rig.rig import rig_from_dict
     from bayes_amb.simulate import SimulationConfig, simulate_recording
     assert rig_gaps(rig) == {} and rig_gaps(load_rig("ross_test_rig")) == {}
-    d = rig.to_dict()
-    bt = d["bearings"]
-    ki, ks = bt.pop("ki"), bt.pop("ks")
-    bt["A"] = {**bt["A"], "ki": ki, "ks": ks}
-    bt["B"] = {**bt["B"], "ki": ki, "ks": ks, "bias_current": 2.0, "saturation_ratio": 1.5}
-    saturating = rig_from_dict(d)
+    saturating = _saturating_at_b(rig)
     ctrl = export_controller(reference_controller(rig, 1e-4), rig)
     cfg = SimulationConfig(truth="reduced", params={"k_By": 0.1}, amplitude=0.3,
                            duration=0.5, dt=1e-4, noise_rms=5e-8, seed=3)
@@ -281,3 +287,37 @@ def test_the_rig_files_saturation_ratio_saturates_the_law(rig):
     d["bearings"]["B"]["saturation_ratio"] = 1.8
     with pytest.raises(BayesAmbError, match=r"bearings\.B\.saturation_ratio.*bias_current"):
         rig_from_dict(d)
+
+
+def test_plan_warns_when_the_iron_saturates_beyond_the_intervals(rig):
+    """A design on a rig whose file gives B's iron saturation: plan computes how far a
+    linear fit would move B's coefficients (fisher.defect_shift, through the loop) and
+    names bearing B with the rms current where the linearisation ends; the move it
+    predicts is within 25 % of a linear fit's own on a record of that rig; on the linear
+    rig there is no such note."""
+    import dataclasses
+
+    from bayes_amb.control.export import export_controller, reference_controller
+    from bayes_amb.discrepancy.adequacy import nominal_assessment
+    from bayes_amb.discrepancy.nonlinear import force_law_defect
+    from bayes_amb.planning.fisher import defect_shift, log10_sigma_of
+    from bayes_amb.planning.plan import Design, plan
+    from bayes_amb.rig.force_law import rig_gaps
+    from bayes_amb.simulate import SimulationConfig, simulate_recording
+    saturating = _saturating_at_b(rig)
+    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
+    p = plan(saturating, ctrl, Design(amplitude=0.3, duration=0.5))
+    note = next(n for n in p.notes if "saturation_ratio" in n)
+    assert "bearing B" in note and "bearing A" not in note
+    assert not any("saturation_ratio" in n for n in
+                   plan(rig, ctrl, Design(amplitude=0.3, duration=0.5)).notes)
+    names = ("k_Bx", "k_By")
+    cfg = SimulationConfig(truth="reduced", amplitude=0.3, duration=0.5, dt=1e-4,
+                           noise_rms=5e-8, seed=3)
+    rec, _ = simulate_recording(saturating, ctrl, cfg)
+    d = force_law_defect(saturating, np.asarray(rec.u),
+                         actuator_displacement(saturating, np.asarray(rec.y)),
+                         rig_gaps(saturating))
+    predicted = defect_shift(rec, names, np.zeros(2), log10_sigma_of(5e-8, 0, 0), d)
+    _, linear, _ = nominal_assessment(dataclasses.replace(rec, rig=rig), names)
+    np.testing.assert_allclose(predicted, linear.params[:2], rtol=0.25)

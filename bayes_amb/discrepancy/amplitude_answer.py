@@ -103,8 +103,9 @@ def _saturated_answer(rig: Rig, u: NDArray, b: str, gap: float, ratio: float,
     small, but in the loop the softening acts on the controller's feedback as well as on
     the excitation, and a linear fit moves the bearing's coefficients by much more: how
     far modelling the law moved them (``shift``) is the answer, and as each shift grows
-    with the current squared, the linear range is the rms current below which the largest
-    stays inside its interval."""
+    with the current squared while each interval narrows as its inverse, the linear range
+    is the rms current where the largest move, over its half-width, falls to one as the
+    cube of the current."""
     j = "AB".index(b)
     sl = slice(2 * j, 2 * j + 2)
     ub = u[:, sl]
@@ -123,7 +124,8 @@ def _saturated_answer(rig: Rig, u: NDArray, b: str, gap: float, ratio: float,
         r = abs(v) / max(0.5 * (hi - lo), 1e-12)
         if r > ratio_hw:
             worst, ratio_hw = n, r
-    i_max = rms / np.sqrt(ratio_hw) if ratio_hw > 0 else None
+    # the move grows as the current squared and the half-width shrinks as its inverse
+    i_max = rms / ratio_hw ** (1.0 / 3.0) if ratio_hw > 0 else None
     derived = {"bias_current_a": i0, "saturation_ratio": ratio, "rms_current_a": rms,
                "ki_shift_relative": ki_shift, "ks_shift_relative": ks_shift,
                "ks_shift_n_per_m": ks_shift * rig.magnets[b].ks,

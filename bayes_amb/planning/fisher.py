@@ -125,6 +125,35 @@ def colour_is_found(like: WhittleLikelihood, phi_model: NDArray, phi_true: NDArr
     return bool(stats.chi2.sf(stat + dof, dof) < P_DOUBT)
 
 
+def defect_shift(recording: Recording, names: tuple[str, ...], theta: NDArray,
+                 log10_sigma: NDArray, d: NDArray) -> NDArray:
+    """How far a linear fit of ``recording`` moves ``names`` from ``theta`` when the plant
+    received the recorded current plus a defect d (N, 4) (a nonlinearity's, as a
+    transform of the data, discrepancy/nonlinear.py): d enters where r2 does, so the
+    residual holds T_r2 d, and one Gauss-Newton step gives the move,
+    -F^-1 2 Re(J^H W T_r2 D), with the white sources' weights W. First order in d."""
+    from scipy.signal import lfilter
+
+    from bayes_amb.control.discrete import ss_freqresp_modal
+    fwd = ForwardModel(recording, names)
+    eps = dual_youla_eps(fwd.parts, np.asarray(recording.y), np.asarray(recording.u))
+    like = WhittleLikelihood(fwd, eps)
+    theta = np.asarray(theta, dtype=float)
+    like.set_model_prewhitening(theta, log10_sigma)
+    J = residual_jacobian(like, theta)
+    H = ss_freqresp_modal(*fwd.noise_system(theta), like.z)[:, :, 8:12] / like.scale
+    w = lfilter(like.prefilter, [1.0], np.asarray(d, dtype=float), axis=0)
+    TD = np.einsum("kij,kj->ki", H, np.fft.rfft(w[getattr(like, "start", 0):],
+                                               axis=0)[like.k])
+    nb = like.starts.size
+    sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
+    W = np.linalg.inv(_spectrum(like, np.repeat(sig2[:, None], nb, axis=1)))
+    WJ = np.einsum("kcd,kdj->kcj", W[np.repeat(np.arange(nb), like.counts)], J)
+    F = 2 * np.einsum("kci,kcj->ij", J.conj(), WJ).real
+    g = 2 * np.einsum("kci,kc->i", WJ.conj(), TD).real
+    return -np.linalg.solve(0.5 * (F + F.T), g)
+
+
 def _spectrum(like: WhittleLikelihood, sig2_band: NDArray) -> NDArray:
     """N Phi_b (n_bands, 4, 4) from per-band source intensities (3, n_bands)."""
     return np.einsum("sb,sbcd->bcd", sig2_band, like.phi_sources) * like.n

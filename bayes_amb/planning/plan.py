@@ -23,6 +23,7 @@ from bayes_amb.io.recording import Recording
 from bayes_amb.planning.colour import NoiseColour, measure_colour, spectrum_colour
 from bayes_amb.planning.fisher import (
     Information,
+    defect_shift,
     fisher_information,
     log10_sigma_of,
     white_fit,
@@ -272,7 +273,8 @@ def plan(rig: Rig, controller: ControllerFile, design: Design | None = None,
              for i in range(REALISATIONS)]
     pars = over_realisations([predicted_parameters(i, rig, priors) for i in infos])
     info = infos[0]
-    notes = [n for n in (magnet_range_note(rig, np.asarray(first.u), pars),) if n]
+    notes = [n for n in (magnet_range_note(rig, np.asarray(first.u), pars),
+                         saturation_note(first, names, th, noise, pars)) if n]
     weak = [n for n, v in pars.items() if not v["informed"]]
     if weak:
         notes.append(f"not informed: {', '.join(weak)} (predicted sd above {NOT_INFORMED:g} x "
@@ -335,6 +337,48 @@ def magnet_range_note(rig: Rig, u: NDArray, pars: dict[str, dict[str, Any]]) -> 
     return ("the design leaves the magnets' linear range (their force law, from the rig "
             "file's bias current): " + "; ".join(out) + ". diagnose would model the law, "
             "but a smaller amplitude keeps the coefficients' meaning simple")
+
+
+def saturation_note(rec: Recording, names: tuple[str, ...], theta: NDArray, noise: Noise,
+                    pars: dict[str, dict[str, Any]]) -> str | None:
+    """A warning when the iron's saturation the rig file gives (saturation_ratio) would
+    move a linear fit of the design's record beyond the predicted intervals. Its static
+    shift is small, but in the loop it acts on the controller's feedback too, so the move
+    is computed through the loop: the rig's law on the design's record (simulated with
+    it) as a current defect, and one Gauss-Newton step of the linear fit
+    (fisher.defect_shift; on a saturating record within 15 % of a fit's own move). Each
+    move grows as the current squared and each half-width shrinks as its inverse, so the
+    linear range is the rms current where their ratio, as the cube, falls to one. None
+    when no bearing saturates or every move stays inside."""
+    from bayes_amb.discrepancy.nonlinear import force_law_defect
+    from bayes_amb.rig.force_law import actuator_displacement, rig_gaps, rig_saturation
+
+    rig = rec.rig
+    saturating = rig_saturation(rig)
+    if not saturating:
+        return None
+    u, y = np.asarray(rec.u, dtype=float), np.asarray(rec.y, dtype=float)
+    d = force_law_defect(rig, u, actuator_displacement(rig, y), rig_gaps(rig))
+    ls = log10_sigma_of(noise.noise_rms, noise.r1_rms, noise.r2_rms)
+    shift = defect_shift(rec, names, theta, ls, d)
+    u = u - np.median(u, axis=0)
+    out = []
+    for j, b in enumerate("AB"):
+        moved = {n: abs(v) / (1.645 * pars[n]["sd"]) for n, v in zip(names, shift, strict=True)
+                 if b in saturating and n[2:3] == b and pars[n]["sd"] > 0}
+        if not moved or max(moved.values()) <= 1.0:
+            continue
+        worst = max(moved, key=moved.get)
+        rms = float(np.sqrt(np.mean(u[:, 2 * j:2 * j + 2] ** 2)))
+        out.append(f"bearing {b}: a linear fit would read {worst} {moved[worst]:.2g} times "
+                   f"its predicted 90 % half-width off at {rms:.3g} A rms; the "
+                   f"linearisation holds below about {rms / moved[worst] ** (1 / 3):.3g} A rms")
+    if not out:
+        return None
+    return ("the design drives the magnets' iron toward saturation (the rig file's "
+            "saturation_ratio): " + "; ".join(out) + ". diagnose and identify model the "
+            "saturating law from the rig file; a smaller amplitude keeps the coefficients "
+            "independent of its knee")
 
 
 def noise_from(recording: Recording, initial_state: bool | None = None) -> Noise:
