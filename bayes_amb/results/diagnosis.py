@@ -259,6 +259,8 @@ class Nonlinearity(Block):
     z: float
     linear_range: str = ""
     derived: dict[str, Any] | None = omitted()
+    saturation: dict[str, float] | None = omitted()
+    """The iron's saturation ratio per bearing, where the rig file gives it."""
 
 
 @block
