@@ -418,6 +418,11 @@ def linearity_check(rec: Recording, clip: Clipping | None = None,
                  f"here ({what})", values)
 
 
+READ_AT = "they are the small-signal ones"
+"""The words of the linearity line that say a record's stiffnesses are read at its own
+current (no force law in the rig file); the diagnosis' summary repeats the point."""
+
+
 def unknown_bias_line(rec: Recording, fitted: Any) -> str:
     """What a record at one level cannot say about the magnets' force law when the rig
     file gives no bias current: the stiffness a linear fit reads is ks (1 + <(i/i0)^2>),
@@ -429,8 +434,8 @@ def unknown_bias_line(rec: Recording, fitted: Any) -> str:
     half = 1.645 * float(np.median(sd)) if sd else 0.0
     if not half > 0 or rms <= 0:
         return ""
-    return (f"the stiffnesses are read at this record's {rms:.3g} A rms current: they are "
-            f"the small-signal ones within their intervals if the magnets' bias current "
+    return (f"the stiffnesses are read at this record's {rms:.3g} A rms current: {READ_AT} "
+            f"within their intervals if the magnets' bias current "
             f"exceeds {rms / np.sqrt(half):.3g} A (the force law reads ks (1 + "
             "<(i/i0)^2>), and a saturating iron softens them; give bearings.bias_current "
             "(and saturation_ratio) in the rig file to model it, or diagnose records at "

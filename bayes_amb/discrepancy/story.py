@@ -6,6 +6,7 @@ from __future__ import annotations
 from typing import TYPE_CHECKING
 
 from bayes_amb.discrepancy.library.registry import REGISTRY
+from bayes_amb.discrepancy.linearity import READ_AT
 from bayes_amb.discrepancy.stand_ins import stand_in_sentence
 
 if TYPE_CHECKING:
@@ -83,6 +84,19 @@ def _swaps(cands: list[CandidateScore]) -> str:
         " with the others held in the model), and replaced it" for k, c in named.items()) + "."
 
 
+def _read_at(checks) -> str:
+    """What one linear record cannot say when the rig file gives the magnets no force
+    law (the linearity line's caveat, linearity.READ_AT), as one sentence; '' otherwise."""
+    lin = next((c for c in checks if c.check == "linearity"), None)
+    if lin is None or READ_AT not in lin.line:
+        return ""
+    return (" The coefficients are the linearisation at this record's current: without the "
+            "magnets' bias current and their iron's saturation in the rig file, one record at "
+            "one level cannot show a smooth nonlinearity of the magnets, which can move them "
+            "beyond their intervals (the linearity check says up to which bias they hold; "
+            "records at two levels, or the rig file's values, tell it).")
+
+
 def plain_language(d: Diagnosis) -> str:
     """One paragraph from the numbers of a diagnosis."""
     mm = d.mismatch
@@ -111,7 +125,8 @@ def plain_language(d: Diagnosis) -> str:
                 "physics could leave (no excitation-coherent band, no line at 1x, no "
                 "cross-correlation with the excitation, no change over time, at a family-wise "
                 f"{100 * mm.evidence.alpha:g} % level), and no candidate physics "
-                "improves the fit enough to be named." + (" " + noise if noise else ""))
+                "improves the fit enough to be named." + (" " + noise if noise else "")
+                + _read_at(checks))
     where = (f"on channel(s) {', '.join(mm.channels)}"
              + (f", in {_bands(mm.bands_hz)}" if mm.bands_hz else "")
              + (f", between {mm.time_s[0]:.2f} and {mm.time_s[1]:.2f} s"
