@@ -321,3 +321,25 @@ def test_plan_warns_when_the_iron_saturates_beyond_the_intervals(rig):
     predicted = defect_shift(rec, names, np.zeros(2), log10_sigma_of(5e-8, 0, 0), d)
     _, linear, _ = nominal_assessment(dataclasses.replace(rec, rig=rig), names)
     np.testing.assert_allclose(predicted, linear.params[:2], rtol=0.25)
+
+
+def test_a_modelled_laws_spread_goes_into_the_named_model():
+    """The nominal fit's extra_cov (a modelled law's or clip's uncertainty) is carried
+    into the named model's coefficients, padded with zeros for the named physics' own
+    parameters; a model with its own, or whose names do not start with the nominal's,
+    is left alone."""
+    from types import SimpleNamespace
+
+    from bayes_amb.discrepancy.diagnose import _carry_modelled_spread
+    extra = np.array([[4.0, 1.0], [1.0, 9.0]])
+    nominal = SimpleNamespace(p=2, names=("k_Ax", "k_Bx"), extra_cov=extra)
+    named = SimpleNamespace(p=3, names=("k_Ax", "k_Bx", "lag"), extra_cov=None)
+    _carry_modelled_spread(nominal, named)
+    np.testing.assert_array_equal(named.extra_cov[:2, :2], extra)
+    assert named.extra_cov.shape == (3, 3) and not named.extra_cov[2].any()
+    own = SimpleNamespace(p=3, names=("k_Ax", "k_Bx", "lag"), extra_cov=np.eye(3))
+    _carry_modelled_spread(nominal, own)
+    np.testing.assert_array_equal(own.extra_cov, np.eye(3))
+    other = SimpleNamespace(p=2, names=("k_Bx", "k_Ax"), extra_cov=None)
+    _carry_modelled_spread(nominal, other)
+    assert other.extra_cov is None

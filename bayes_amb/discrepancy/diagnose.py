@@ -201,6 +201,23 @@ def _verdict(checks: DataChecks, loc: Location, accepted: list[FittedModel],
     return "mismatch, unexplained" if loc.detected else "no mismatch"
 
 
+def _carry_modelled_spread(nominal: FittedModel, reported: FittedModel) -> None:
+    """A nonlinearity the nominal fit modelled (the rig file's force law, a clip) is in the
+    named model too, at the same parameter: its uncertainty (the nominal's extra_cov, from
+    refits at its parameter's ends) goes into the named model's coefficients as well.
+    Without it, a lag named beside a force law whose bias is known to 5 % left the
+    stiffnesses intervals a third as wide as the law's own spread allows (3 of the 8
+    stiffnesses of one foreign force law + lag record outside)."""
+    if reported is nominal or nominal.extra_cov is None or reported.extra_cov is not None:
+        return
+    p = nominal.p
+    if tuple(reported.names[:p]) != tuple(nominal.names):
+        return
+    extra = np.zeros((reported.p, reported.p))
+    extra[:p, :p] = nominal.extra_cov[:p, :p]
+    reported.extra_cov = extra
+
+
 def _law_shift(nominal: FittedModel) -> dict[str, float] | None:
     """How far modelling a nonlinearity moved each bearing coefficient (None when none
     was modelled)."""
@@ -319,6 +336,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         final_loc = loc
     unexplained = unexplained_block(final_loc, sel.final)
     reported = with_direct_terms(sel.final, priors)
+    _carry_modelled_spread(nominal, reported)
     if reported is not sel.final:
         say("fitting the direct stiffness and damping beside the cross-coupling at "
             + ", ".join(c.location for c in direct_companions(sel.final)))
