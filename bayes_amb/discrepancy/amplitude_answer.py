@@ -28,14 +28,14 @@ UNITS = {"gap_m": "m", "slew_a_per_s": "A/s", "limit_a": "A"}
 
 def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
                        coefficients: dict[str, dict[str, Any]],
-                       recorded_u: NDArray | None = None,
-                       shift: dict[str, float] | None = None) -> dict[str, Any] | None:
+                       recorded_u: NDArray | None = None) -> dict[str, Any] | None:
     """The diagnosis' nonlinearity block from the linearity check's values (None when no
     nonlinearity was modelled): the parameter per location with its 90 % interval and the
     amplitude answer. coefficients: the reported bearing coefficients (theta summaries);
     recorded_u: the currents as recorded (a coil current's flat tops, before the offsets
-    check's detrending tilts them; default u); shift: how far modelling the nonlinearity
-    moved each coefficient (a saturating magnet's linear range is read from it)."""
+    check's detrending tilts them; default u). A saturating magnet's linear range is
+    read from how far modelling the law moved each coefficient (the check's
+    ``coefficient_shift``, in the coefficients' order)."""
     modelled = values.get("modelled")
     if modelled is None:
         return None
@@ -55,8 +55,10 @@ def nonlinearity_block(values: dict[str, Any], rig: Rig, u: NDArray, dt: float,
                  "z": values.get("clipping_z", 0.0)}
     else:                                           # a recorded coil current held at a limit
         return _coil_limit(np.asarray(u if recorded_u is None else recorded_u, dtype=float))
+    # a modelled loop's shift carries its lag after the coefficients; none: {}
+    shift = dict(zip(coefficients, values.get("coefficient_shift") or (), strict=False))
     block["linear_range"], block["derived"] = _amplitude_answer(block, rig, u, dt,
-                                                                 coefficients, shift or {})
+                                                                 coefficients, shift)
     return block
 
 

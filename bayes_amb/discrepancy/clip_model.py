@@ -252,22 +252,16 @@ def _parameter_spread(recording: Recording, names: tuple[str, ...],
                       ) -> np.ndarray:
     """The coefficients' covariance from the nonlinear parameter's own error: per
     location, refits with it one sd below and above its estimate (T_r2 at the fit), half
-    their difference as one sd (rank one each, summed)."""
+    their difference as one sd (rank one each, summed); a saturating force law's ratio
+    per bearing likewise."""
     cov = np.zeros((fitted.params.size, fitted.params.size))
-    ends = found.ends()
+    ends = [{"at": v} for v in found.ends()] + [{"saturation": v}
+                                                for v in found.saturation_ends()]
     for lo, hi in zip(ends[::2], ends[1::2], strict=True):
         pair = [_params_of(_fit_taking_out(
             recording, names, priors, seed, checks, eps, fitted,
-            found.defect(recording.rig, checks.u, checks.y, recording.dt, at=at)), fitted)
-            for at in (lo, hi)]
-        half = 0.5 * (pair[1] - pair[0])
-        cov += np.outer(half, half)
-    sat_ends = found.saturation_ends()
-    for lo, hi in zip(sat_ends[::2], sat_ends[1::2], strict=True):
-        pair = [_params_of(_fit_taking_out(
-            recording, names, priors, seed, checks, eps, fitted,
-            found.defect(recording.rig, checks.u, checks.y, recording.dt, saturation=at)),
-            fitted) for at in (lo, hi)]
+            found.defect(recording.rig, checks.u, checks.y, recording.dt, **end)), fitted)
+            for end in (lo, hi)]
         half = 0.5 * (pair[1] - pair[0])
         cov += np.outer(half, half)
     if found.name == SLEW:

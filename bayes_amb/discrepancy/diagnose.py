@@ -218,16 +218,6 @@ def _carry_modelled_spread(nominal: FittedModel, reported: FittedModel) -> None:
     reported.extra_cov = extra
 
 
-def _law_shift(nominal: FittedModel) -> dict[str, float] | None:
-    """How far modelling a nonlinearity moved each bearing coefficient (None when none
-    was modelled)."""
-    if nominal.modelled_shift is None:
-        return None
-    names = nominal.forward.theta_names
-    return {n: float(v) for n, v in zip(names, nominal.modelled_shift[:len(names)],
-                                        strict=True)}
-
-
 def _running_speed(nominal: FittedModel, loc: Location, residual: np.ndarray
                    ) -> dict[str, Any] | None:
     """When the nominal residual holds a line at 1x, the running speed is estimated from it
@@ -421,7 +411,7 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "nonlinearity": nonlinearity_block(
             next(c for c in checks.checks if c.name == "linearity").values,
             recording.rig, checks.u, recording.dt, theta_summary(reported, s_coef),
-            recording.u, _law_shift(nominal)),
+            recording.u),
         "model_error": {"before": _model_error_dict(nominal),
                         "after": _model_error_dict(reported)},
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "

@@ -154,6 +154,21 @@ def r2_response(forward, theta: NDArray, d: NDArray) -> NDArray:
     return ss_response(A, B[:, 8:12], C, np.asarray(D)[:, 8:12], d)
 
 
+def r2_filter(like, theta: NDArray) -> NDArray:
+    """T_r2 (nf, 4, 4): the model's own r2 -> eps filter at theta in the likelihood's bins,
+    on the residual's scale (a current added at the plant input enters the residual
+    through it with a gain of exactly one)."""
+    return ss_freqresp_modal(*like.forward.noise_system(theta), like.z)[:, :, 8:12] / like.scale
+
+
+def r2_bins(like, H: NDArray, d: NDArray) -> NDArray:
+    """T_r2 d in the likelihood's bins (nf, 4) for a current d (N, 4) added at the plant
+    input, prefiltered and windowed as the residual is (H: r2_filter)."""
+    w = lfilter(like.prefilter, [1.0], np.asarray(d, dtype=float), axis=0)
+    D = np.fft.rfft(w[getattr(like, "start", 0):], axis=0)[like.k]
+    return np.einsum("kij,kj->ki", H, D)
+
+
 class Regression:
     """The whitened residual DFT of a fitted model, its Jacobian, its r2 -> eps filter and
     the band grouping, shared by the clipping test and the limit's estimate."""
@@ -164,8 +179,7 @@ class Regression:
         p = theta.size
         rows = like.residual_dft(np.vstack([theta, theta + JAC_STEP * np.eye(p)]))[0]
         J = (rows[1:] - rows[0][None]) / JAC_STEP                     # (p, nf, 4)
-        self.H = ss_freqresp_modal(*like.forward.noise_system(theta),
-                                   like.z)[:, :, 8:12] / like.scale
+        self.H = r2_filter(like, theta)
         chol = np.linalg.cholesky(like.curvature_weights(theta, log10_sigma))  # W = L L^H
         self.LH = np.conj(np.swapaxes(chol, 1, 2))[np.repeat(np.arange(like.starts.size),
                                                               like.counts)]
@@ -193,10 +207,8 @@ class Regression:
 
     def defect_dft(self, d: NDArray) -> NDArray:
         """T_r2 d in the likelihood's bins (nf, 4) for a current d (N, 4) added at the
-        plant input, prefiltered and windowed as the residual is."""
-        w = lfilter(self.like.prefilter, [1.0], d, axis=0)
-        D = np.fft.rfft(w[self.start:], axis=0)[self.like.k]
-        return np.einsum("kij,kj->ki", self.H, D)
+        plant input (r2_bins)."""
+        return r2_bins(self.like, self.H, d)
 
     def clip_dft(self, limit: float, centre: NDArray | None = None) -> NDArray:
         """T_r2 d in the likelihood's bins (nf, 4), d the clip defect at this limit and

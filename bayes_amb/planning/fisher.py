@@ -67,6 +67,18 @@ def log10_sigma_of(noise_rms: float, r1_rms: float, r2_rms: float) -> NDArray:
     return np.array(out)
 
 
+def _linearised(recording: Recording, names: tuple[str, ...], theta: NDArray,
+                log10_sigma: NDArray) -> tuple[WhittleLikelihood, NDArray, NDArray]:
+    """identify's likelihood of ``recording`` prewhitened at (theta, log10_sigma), theta
+    as floats, and its residual Jacobian there (nf, 4, p)."""
+    fwd = ForwardModel(recording, names)
+    eps = dual_youla_eps(fwd.parts, np.asarray(recording.y), np.asarray(recording.u))
+    like = WhittleLikelihood(fwd, eps)
+    theta = np.asarray(theta, dtype=float)
+    like.set_model_prewhitening(theta, log10_sigma)
+    return like, theta, residual_jacobian(like, theta)
+
+
 def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDArray,
                        log10_sigma: NDArray,
                        source_gain: Callable[[NDArray], NDArray] | None = None,
@@ -78,12 +90,7 @@ def fisher_information(recording: Recording, names: tuple[str, ...], theta: NDAr
     kept): the noise spectrum is then the true one, not the likelihood's white model, and
     F the information of an estimator that knows it. ``colour`` (colour.py), if given: the
     white spectrum coloured as measured on an earlier recording is the true one."""
-    fwd = ForwardModel(recording, names)
-    eps = dual_youla_eps(fwd.parts, np.asarray(recording.y), np.asarray(recording.u))
-    like = WhittleLikelihood(fwd, eps)
-    theta = np.asarray(theta, dtype=float)
-    like.set_model_prewhitening(theta, log10_sigma)
-    J = residual_jacobian(like, theta)
+    like, theta, J = _linearised(recording, names, theta, log10_sigma)
     nb = like.starts.size
     sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
     gain = np.ones((3, nb)) if source_gain is None else source_gain(like.band_freq_hz)
@@ -132,19 +139,9 @@ def defect_shift(recording: Recording, names: tuple[str, ...], theta: NDArray,
     transform of the data, discrepancy/nonlinear.py): d enters where r2 does, so the
     residual holds T_r2 d, and one Gauss-Newton step gives the move,
     -F^-1 2 Re(J^H W T_r2 D), with the white sources' weights W. First order in d."""
-    from scipy.signal import lfilter
-
-    from bayes_amb.control.discrete import ss_freqresp_modal
-    fwd = ForwardModel(recording, names)
-    eps = dual_youla_eps(fwd.parts, np.asarray(recording.y), np.asarray(recording.u))
-    like = WhittleLikelihood(fwd, eps)
-    theta = np.asarray(theta, dtype=float)
-    like.set_model_prewhitening(theta, log10_sigma)
-    J = residual_jacobian(like, theta)
-    H = ss_freqresp_modal(*fwd.noise_system(theta), like.z)[:, :, 8:12] / like.scale
-    w = lfilter(like.prefilter, [1.0], np.asarray(d, dtype=float), axis=0)
-    TD = np.einsum("kij,kj->ki", H, np.fft.rfft(w[getattr(like, "start", 0):],
-                                               axis=0)[like.k])
+    from bayes_amb.discrepancy.linearity import r2_bins, r2_filter
+    like, theta, J = _linearised(recording, names, theta, log10_sigma)
+    TD = r2_bins(like, r2_filter(like, theta), d)
     nb = like.starts.size
     sig2 = 10.0 ** (2 * np.asarray(log10_sigma, dtype=float))
     W = np.linalg.inv(_spectrum(like, np.repeat(sig2[:, None], nb, axis=1)))

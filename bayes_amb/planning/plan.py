@@ -318,14 +318,14 @@ def magnet_range_note(rig: Rig, u: NDArray, pars: dict[str, dict[str, Any]]) -> 
     law makes a linear fit read ks (1 + <(i/i0)^2>) (discrepancy/nonlinear.py); the range
     is left when that shift exceeds the predicted 90 % half-width of the bearing's
     stiffness coefficients. None when no bearing leaves it (or none gives its bias)."""
-    u = u - np.median(u, axis=0)
+    rms_of = _bearing_rms(u)
     out = []
-    for j, b in enumerate("AB"):
+    for b in "AB":
         i0 = rig.magnets[b].bias_current
         hw = [1.645 * v["sd"] for n, v in pars.items() if n.startswith(f"k_{b}")]
         if not i0 or not hw:
             continue
-        rms = float(np.sqrt(np.mean(u[:, 2 * j:2 * j + 2] ** 2)))
+        rms = rms_of[b]
         shift, half = (rms / i0) ** 2, float(np.median(hw))
         if shift > half:
             out.append(f"bearing {b}: {rms:.3g} A rms against a bias of {i0:g} A makes a "
@@ -337,6 +337,13 @@ def magnet_range_note(rig: Rig, u: NDArray, pars: dict[str, dict[str, Any]]) -> 
     return ("the design leaves the magnets' linear range (their force law, from the rig "
             "file's bias current): " + "; ".join(out) + ". diagnose would model the law, "
             "but a smaller amplitude keeps the coefficients' meaning simple")
+
+
+def _bearing_rms(u: NDArray) -> dict[str, float]:
+    """The rms current (A) about its median on each bearing's two axes."""
+    u = np.asarray(u, dtype=float)
+    u = u - np.median(u, axis=0)
+    return {b: float(np.sqrt(np.mean(u[:, 2 * j:2 * j + 2] ** 2))) for j, b in enumerate("AB")}
 
 
 def saturation_note(rec: Recording, names: tuple[str, ...], theta: NDArray, noise: Noise,
@@ -361,15 +368,15 @@ def saturation_note(rec: Recording, names: tuple[str, ...], theta: NDArray, nois
     d = force_law_defect(rig, u, actuator_displacement(rig, y), rig_gaps(rig))
     ls = log10_sigma_of(noise.noise_rms, noise.r1_rms, noise.r2_rms)
     shift = defect_shift(rec, names, theta, ls, d)
-    u = u - np.median(u, axis=0)
+    rms_of = _bearing_rms(u)
     out = []
-    for j, b in enumerate("AB"):
+    for b in sorted(saturating):
         moved = {n: abs(v) / (1.645 * pars[n]["sd"]) for n, v in zip(names, shift, strict=True)
-                 if b in saturating and n[2:3] == b and pars[n]["sd"] > 0}
+                 if n[2:3] == b and pars[n]["sd"] > 0}
         if not moved or max(moved.values()) <= 1.0:
             continue
         worst = max(moved, key=moved.get)
-        rms = float(np.sqrt(np.mean(u[:, 2 * j:2 * j + 2] ** 2)))
+        rms = rms_of[b]
         out.append(f"bearing {b}: a linear fit would read {worst} {moved[worst]:.2g} times "
                    f"its predicted 90 % half-width off at {rms:.3g} A rms; the "
                    f"linearisation holds below about {rms / moved[worst] ** (1 / 3):.3g} A rms")
