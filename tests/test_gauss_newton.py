@@ -112,6 +112,26 @@ def test_compiled_band_algebra_is_the_numpy_one(case):
     assert not lin._terms_numpy(w, bad, wt)[0]
 
 
+def test_analytic_curvatures_are_the_gradients_differences(case):
+    """LinearModel.curvatures (the trust region's scales) equals central differences of
+    the linear model's own analytic gradient, prior included; a wrong M_jj is seen."""
+    rec, eps = case
+    _, like, post = build(rec, NAMES, eps)
+    x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])
+    like.set_noise_reference(x[:4])
+    lin = gn.linearise(post, x, np.arange(4))
+    curv = lin.curvatures(x[4:])
+    fd = np.empty(4)
+    for j in range(4):
+        dv = np.zeros(4)
+        dv[j] = 1e-6
+        fd[j] = -(lin.value_grad(dv, x[4:])[1][j] - lin.value_grad(-dv, x[4:])[1][j]) / 2e-6
+    assert np.all(fd > 0)
+    assert np.allclose(curv, fd, rtol=1e-6), (curv, fd)
+    lin.MT[2, :, 2] *= 1.5                      # M[2, 2]: column 1's own block
+    assert abs(lin.curvatures(x[4:])[1] / fd[1] - 1) > 1e-3
+
+
 def test_search_reaches_the_lbfgs_optimum(clean):
     rec, eps = clean
     nominal = fit_nominal(rec, NAMES, eps)

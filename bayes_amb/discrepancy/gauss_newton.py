@@ -144,6 +144,40 @@ class LinearModel:
         g_ls = 2 * _LN10 * sig2 * (tr_psi @ like.nu - tr_k)
         return ll + float(lp), g_delta, g_ls
 
+    def curvatures(self, ls: NDArray) -> NDArray:
+        """-d2 m / d delta_j2 at delta = 0 for every column j, analytic: with K_b = S_b^-1
+        at w = (1, 0, ..), D_jb = M_b[j, 0] + M_b[j, 0]^H (dS_b / d delta_j) and d2S_b /
+        d delta_j2 = 2 M_b[j, j], each term is sum_b wt_b (2 Re tr(K_b M_b[j, j]) -
+        tr(K_b D_jb K_b D_jb)), plus the prior's curvature (differences of its gradient).
+        NaN where a band's S_b is not positive definite."""
+        like = self.like
+        nb = like.starts.size
+        q = self.cols.size
+        _, Psi, _, _, ok = self._noise_terms(ls)
+        MT = self.MT.reshape(q + 1, nb, P_CH, P_CH, q + 1)
+        S = Psi + MT[0, :, :, :, 0]
+        try:
+            K = np.linalg.inv(S) if ok else None
+        except np.linalg.LinAlgError:
+            K = None
+        if K is None or not np.all(np.linalg.eigvalsh(S)[:, 0] > 0):
+            return np.full(q, np.nan)
+        j = np.arange(1, q + 1)
+        Mjj = MT[j, :, :, :, j]                                 # (q, nb, 4, 4)
+        Q = MT[j, :, :, :, 0]
+        D = Q + Q.conj().transpose(0, 1, 3, 2)
+        KD = K[None] @ D
+        wt = like.nu + like.counts
+        t1 = 2 * np.einsum("bij,qbji->qb", K, Mjj).real
+        t2 = np.einsum("qbij,qbji->qb", KD, KD).real
+        theta = self.x0[:self.post.p]
+        h = 1e-6
+        up, dn = theta.copy(), theta.copy()
+        up[self.cols] += h
+        dn[self.cols] -= h
+        prior = -(prior_gradient(self.post, up) - prior_gradient(self.post, dn))[self.cols] / (2 * h)
+        return (t1 - t2) @ wt + prior
+
     def _terms_numpy(self, w: NDArray, Psi: NDArray, wt: NDArray
                      ) -> tuple[bool, float, NDArray, NDArray]:
         """hermitian_kernels.linear_terms in numpy (BAYES_AMB_KERNEL=numpy)."""
@@ -186,27 +220,24 @@ def linearise(post: LogPosterior, x: NDArray, cols: NDArray, step: float = _STEP
 
 def _curvature_scales(lin: LinearModel, ls: NDArray, noise: bool, width: NDArray
                       ) -> NDArray:
-    """1/sqrt(-d2 m / dv_j2) per free coordinate of the linear model (differences of its
+    """1/sqrt(-d2 m / dv_j2) per free coordinate of the linear model (the parameters'
+    analytic, LinearModel.curvatures; the noise intensities' from differences of the
     analytic gradient), the prior width where the curvature is not usable."""
     q = lin.cols.size
     d = q + (3 if noise else 0)
     out = np.empty(d)
+    out[:q] = lin.curvatures(ls)
     zero = np.zeros(q)
-    for j in range(d):
-        eps = 1e-6 if j < q else 1e-4
+    for j in range(q, d):
+        eps = 1e-4
         g = []
         for s in (eps, -eps):
-            dv = zero.copy()
             lsv = ls.copy()
-            if j < q:
-                dv[j] = s
-            else:
-                lsv[j - q] += s
-            _, gd, gl = lin.value_grad(dv, lsv)
-            g.append(gd[j] if j < q else gl[j - q])
-        curv = -(g[0] - g[1]) / (2 * eps)
-        out[j] = 1.0 / np.sqrt(curv) if np.isfinite(curv) and curv > 0 else width[j]
-    return np.clip(out, 1e-12, width)
+            lsv[j - q] += s
+            g.append(lin.value_grad(zero, lsv)[2][j - q])
+        out[j] = -(g[0] - g[1]) / (2 * eps)
+    ok = np.isfinite(out) & (out > 0)
+    return np.clip(np.where(ok, 1.0 / np.sqrt(np.where(ok, out, 1.0)), width), 1e-12, width)
 
 
 def _maximise_model(lin: LinearModel, ls0: NDArray, noise: bool, lo: NDArray, hi: NDArray,
