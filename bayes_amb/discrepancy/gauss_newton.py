@@ -175,8 +175,8 @@ class LinearModel:
         up, dn = theta.copy(), theta.copy()
         up[self.cols] += h
         dn[self.cols] -= h
-        prior = -(prior_gradient(self.post, up) - prior_gradient(self.post, dn))[self.cols] / (2 * h)
-        return (t1 - t2) @ wt + prior
+        prior = -(prior_gradient(self.post, up) - prior_gradient(self.post, dn)) / (2 * h)
+        return (t1 - t2) @ wt + prior[self.cols]
 
     def _terms_numpy(self, w: NDArray, Psi: NDArray, wt: NDArray
                      ) -> tuple[bool, float, NDArray, NDArray]:
