@@ -113,8 +113,9 @@ def test_compiled_band_algebra_is_the_numpy_one(case):
 
 
 def test_analytic_curvatures_are_the_gradients_differences(case):
-    """LinearModel.curvatures (the trust region's scales) equals central differences of
-    the linear model's own analytic gradient, prior included; a wrong M_jj is seen."""
+    """LinearModel.hessian and its diagonal, curvatures (the trust region's scales, the
+    Newton start of the linear model's search), equal central differences of the linear
+    model's own analytic gradient, prior included; a wrong M_jj is seen."""
     rec, eps = case
     _, like, post = build(rec, NAMES, eps)
     x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])
@@ -128,8 +129,41 @@ def test_analytic_curvatures_are_the_gradients_differences(case):
         fd[j] = -(lin.value_grad(dv, x[4:])[1][j] - lin.value_grad(-dv, x[4:])[1][j]) / 2e-6
     assert np.all(fd > 0)
     assert np.allclose(curv, fd, rtol=1e-6), (curv, fd)
-    lin.MT[2, :, 2] *= 1.5                      # M[2, 2]: column 1's own block
-    assert abs(lin.curvatures(x[4:])[1] / fd[1] - 1) > 1e-3
+    MT = lin.MT.copy()
+    MT[2, :, 2] *= 1.5                          # M[2, 2]: column 1's own block
+    wrong = gn.LinearModel(post, lin.x0, lin.cols, MT)
+    assert abs(wrong.curvatures(x[4:])[1] / fd[1] - 1) > 1e-3
+    # the off-diagonal entries: differences of the gradient along another column
+    H = lin.hessian(x[4:])
+    dv = np.zeros(4)
+    dv[3] = 1e-6
+    col = -(lin.value_grad(dv, x[4:])[1] - lin.value_grad(-dv, x[4:])[1]) / 2e-6
+    assert np.allclose(H[:, 3], col, rtol=1e-5, atol=1e-6 * np.abs(col).max()), (H[:, 3], col)
+    assert np.allclose(H, H.T, rtol=1e-12, atol=1e-12 * np.abs(H).max())
+
+
+def test_a_family_members_hessian_is_its_gradients_differences(case):
+    """A scan member's linear model (family._Restricted: the member's priors in place of the
+    basis' wide ones) has the Hessian of its own value_grad, lognormal prior included."""
+    from bayes_amb.discrepancy.family import _Restricted
+    from bayes_amb.inference.priors import Prior
+
+    rec, eps = case
+    _, like, post = build(rec, NAMES, eps)
+    x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])
+    like.set_noise_reference(x[:4])
+    lin = gn.linearise(post, x, np.arange(4))
+    pri = [Prior("normal", 0.0, 0.02), Prior("lognormal", 0.0, 0.5),
+           Prior("normal", 0.1, 0.3), Prior("uniform", -1.0, 1.0)]
+    r = _Restricted(lin, pri, np.array([0.0, 1.0, 0.0, 0.0]))
+    H = r.hessian(x[4:])
+    for j in range(4):
+        dv = np.zeros(4)
+        dv[j] = 1e-6
+        col = -(r.value_grad(dv, x[4:])[1] - r.value_grad(-dv, x[4:])[1]) / 2e-6
+        assert np.allclose(H[:, j], col, rtol=1e-5, atol=1e-6 * np.abs(col).max()), (j, H, col)
+    # the member's priors are in it: the normal one's 1/sd^2 on its diagonal
+    assert H[0, 0] - lin.hessian(x[4:])[0, 0] == pytest.approx(1 / 0.02**2, rel=1e-4)
 
 
 def test_search_reaches_the_lbfgs_optimum(clean):

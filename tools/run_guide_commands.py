@@ -11,7 +11,9 @@ backslash continuations joined as bash joins them (a `for ... done` loop is one 
 identify: error: ...` are outputs the page shows: INSTANCE gives the command that should
 print them. A synopsis (`NAME.csv`, `DIR`, `[--rig FILE]`, `...`) or a bare command name
 runs as the concrete instance in INSTANCE ("=TEXT": the run of TEXT elsewhere). Commands
-in NOT_RUN are too long to run here: their options are checked against `--help` instead.
+in NOT_RUN are too long to run here: their options are checked against `--help` instead,
+unless --long is given (then they run as written too, but for those whose inputs are the
+records of another long run: "needs ...").
 
 Each page runs in OUT/<page>/ in page order (SETUP copies or makes what it needs first: the
 user's own files come from studies/own_rig_scenario.sh); README, getting_started and any
@@ -140,6 +142,7 @@ NOT_RUN = {      # (page, command start) -> why; the options are checked against
     ("README", "make test"): "",
 }
 HEAVY = {"make test"}
+LONG = False            # --long: the NOT_RUN commands run as written too (main sets it)
 SETUP = {   # run in the page's folder before the page (or before PAGE:LINE)
     "README": [f"test -f $OUT/own_rig/my_rotor.toml || {SCENARIO}",
                "cp $OUT/own_rig/my_rotor.toml $CLONE/"],
@@ -214,6 +217,8 @@ def classify(c: dict) -> None:
         c["status"], c["run"] = "instance", INSTANCE[(stem, text)]
     elif text in MENTIONS:
         c["status"], c["run"] = "command name: its --help", HELP.format(text)
+    elif nr and text.split(" #")[0] not in HEAVY and LONG and not nr[0].startswith("needs"):
+        c["status"] = "as written (long: " + nr[0] + ")"
     elif nr and text.split(" #")[0] not in HEAVY:
         c["status"], c["run"] = "not run: " + nr[0], optcheck(text)
     elif OUTPUT.match(text):
@@ -281,7 +286,8 @@ def run_page(page: str, cmds: list[dict], args, results: dict) -> None:
         if c["status"] == "variable":
             variables.append(bare(c["text"]))
         if not c["run"] or c["run"].startswith("=") or (
-                c["text"].split(" #")[0] in HEAVY and not args.heavy):
+                c["text"].split(" #")[0] in HEAVY and not args.heavy) or (
+                args.match and not re.search(args.match, c["text"])):
             continue
         for s in SETUP.get(f"{stem}:{c['line']}", []):
             go(s, cwd_of(stem, "", args))
@@ -318,7 +324,15 @@ def main() -> None:
     ap.add_argument("--timeout", type=float, default=1800.0)
     ap.add_argument("--heavy", action="store_true", help="also run `make test` and the like")
     ap.add_argument("--force", action="store_true", help="run again what was run")
+    ap.add_argument("--match", default="",
+                    help="run only the commands whose text matches this regular expression "
+                         "(the pages' set-up still runs)")
+    ap.add_argument("--long", action="store_true",
+                    help="also run the long commands (NOT_RUN) as written, but for those that "
+                         "need another long run's records")
     args = ap.parse_args()
+    global LONG
+    LONG = args.long
     args.bin = args.bin or f"{args.clone}/.venv/bin"
     wanted = set(filter(None, args.pages.split(",")))
     all_cmds = []
