@@ -15,10 +15,11 @@ so the log posterior of the linearised model, exact in the noise intensities, co
 4 x 4 algebra of the bands only, with an analytic gradient and an analytic Hessian in the
 parameters (LinearModel.hessian; the noise intensities' rows by differences of the
 gradient). The Hessian's diagonal scales the coordinates, and the search of the linear
-model starts from its Newton step: from there L-BFGS-B stops within a few steps (median
-4 on ROSS's test rig's diagnosis, where from the model's point it took 13, and 20-70
-where it ground against the rounding of a log posterior of order 1e5; its ftol of 1e-9
-stops it above that rounding). J comes from one batch of q + 1
+model starts from its Newton step, and stops at an ftol of 1e-9, above the rounding of a
+log posterior of order 1e5: L-BFGS-B then takes a median of 3 evaluations (mean 5.7)
+per search on the diagnosis of ROSS's test rig in `bayes-amb bench --only rigs`, where
+from the model's point with an ftol of 1e-14 it took 12 (mean 21, a tenth of the
+searches above 50, grinding against that rounding). J comes from one batch of q + 1
 kernel rows (forward differences of R: R is close to linear in theta, so its differences
 are accurate to about the step, where differences of log L near the optimum are not). The
 linearised posterior is maximised inside a trust region (box of +-radius curvature scales
