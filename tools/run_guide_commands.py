@@ -125,7 +125,7 @@ NOT_RUN = {      # (page, command start) -> why; the options are checked against
     ("diagnose", "PYTHONPATH=. python studies/nonlinear_foreign.py"): "10-24 records diagnosed, ~30-60 min",
     ("diagnose", ".venv/bin/python -m benchmarks.foreign.benchmark --out runs/foreign --per-kind 4"):
         "78 records diagnosed, ~1.5 h on 2 cores",
-    ("diagnose", "bayes-amb study studies/concealed.toml"): "55 diagnoses, ~16 min (the page's own figure)",
+    ("diagnose", "bayes-amb study studies/concealed.toml"): "55 diagnoses, ~4 min",
     ("identify", "PYTHONPATH=. python studies/coloured_noise.py"): "50 foreign records, ~30-60 min",
     ("plan", "PYTHONPATH=. python studies/plan_check.py"): "400 (100) records identified, ~40 min",
     ("plan", "PYTHONPATH=. python studies/plan_detect.py"): "7 effects, a diagnosis each, ~10 min",
