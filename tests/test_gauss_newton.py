@@ -113,15 +113,15 @@ def test_compiled_band_algebra_is_the_numpy_one(case):
 
 
 def test_analytic_curvatures_are_the_gradients_differences(case):
-    """LinearModel.hessian and its diagonal, curvatures (the trust region's scales, the
-    Newton start of the linear model's search), equal central differences of the linear
+    """LinearModel.hessian (its diagonal: the trust region's scales; the whole: the Newton
+    start of the linear model's search) equals central differences of the linear
     model's own analytic gradient, prior included; a wrong M_jj is seen."""
     rec, eps = case
     _, like, post = build(rec, NAMES, eps)
     x = np.array([0.05, 0.2, 0.05, -0.05, -7.0, -9.0, -1.7])
     like.set_noise_reference(x[:4])
     lin = gn.linearise(post, x, np.arange(4))
-    curv = lin.curvatures(x[4:])
+    curv = np.diag(lin.hessian(x[4:]))
     fd = np.empty(4)
     for j in range(4):
         dv = np.zeros(4)
@@ -132,7 +132,7 @@ def test_analytic_curvatures_are_the_gradients_differences(case):
     MT = lin.MT.copy()
     MT[2, :, 2] *= 1.5                          # M[2, 2]: column 1's own block
     wrong = gn.LinearModel(post, lin.x0, lin.cols, MT)
-    assert abs(wrong.curvatures(x[4:])[1] / fd[1] - 1) > 1e-3
+    assert abs(wrong.hessian(x[4:])[1, 1] / fd[1] - 1) > 1e-3
     # the off-diagonal entries: differences of the gradient along another column
     H = lin.hessian(x[4:])
     dv = np.zeros(4)

@@ -45,6 +45,7 @@ from bayes_amb.discrepancy.fitting import FittedModel, _embed, extend
 from bayes_amb.discrepancy.gauss_newton import (
     LinearModel,
     linearise,
+    log_prior_curvature,
     log_prior_gradient,
     maximise_in_box,
 )
@@ -192,15 +193,11 @@ class _Restricted:
         g = g + t / WIDE_SD ** 2 + log_prior_gradient(self.priors, x)
         return f, g, gl
 
-    def hessian(self, ls: NDArray, h: float = 1e-6) -> NDArray:
+    def hessian(self, ls: NDArray) -> NDArray:
         """-d2 / dt2 of value_grad's function at t = 0: the linear model's, its wide priors'
-        curvature taken out and the member's priors' put in (differences of their
-        gradient)."""
-        q = self.cols.size
-        up = log_prior_gradient(self.priors, self.null + h)
-        dn = log_prior_gradient(self.priors, self.null - h)
-        return (self.lin.hessian(ls) - np.eye(q) / WIDE_SD ** 2
-                - np.diag((up - dn) / (2 * h)))
+        curvature taken out and the member's priors' put in."""
+        return (self.lin.hessian(ls) - np.eye(self.cols.size) / WIDE_SD ** 2
+                + np.diag(log_prior_curvature(self.priors, self.null)))
 
 
 def _coefficients(basis: tuple[Candidate, ...], members: list[Candidate],

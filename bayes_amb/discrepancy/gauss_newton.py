@@ -88,6 +88,14 @@ def log_prior_gradient(priors: Sequence[Prior], theta: NDArray) -> NDArray:
     return g
 
 
+def log_prior_curvature(priors: Sequence[Prior], theta: NDArray, h: float = 1e-6
+                        ) -> NDArray:
+    """-d2 log p / d theta_j2 of independent priors, one per entry of theta: central
+    differences (step h) of :func:`log_prior_gradient`."""
+    return -(log_prior_gradient(priors, theta + h) - log_prior_gradient(priors, theta - h)) / (
+        2 * h)
+
+
 @dataclass
 class LinearModel:
     """The log posterior of the model linearised at x0 in the parameters ``cols`` (see
@@ -103,6 +111,8 @@ class LinearModel:
         # the noise sources' band spectra as they enter Psi_b (likelihood.RobustWhittle)
         self.phi = like.phi_sources * (like.n * (like.nu - like.shift))[None, :, None, None]
         self._noise_key: bytes | None = None
+        self._hess_key: bytes | None = None     # hessian's and hessian_with_noise's ls
+        self._full_key: bytes | None = None
 
     @property
     def like(self) -> RobustWhittle:
@@ -151,11 +161,6 @@ class LinearModel:
         g_ls = 2 * _LN10 * sig2 * (tr_psi @ like.nu - tr_k)
         return ll + float(lp), g_delta, g_ls
 
-    def curvatures(self, ls: NDArray) -> NDArray:
-        """-d2 m / d delta_j2 at delta = 0 for every column j: the diagonal of
-        :meth:`hessian`."""
-        return np.diag(self.hessian(ls)).copy()
-
     def hessian(self, ls: NDArray) -> NDArray:
         """-d2 m / d delta_j d delta_k at delta = 0 (q x q), analytic: with K_b = S_b^-1 at
         w = (1, 0, ..), D_jb = M_b[j, 0] + M_b[j, 0]^H (dS_b / d delta_j) and d2S_b /
@@ -164,7 +169,7 @@ class LinearModel:
         diagonal (differences of its gradient; the priors are independent). NaN where a
         band's S_b is not positive definite. Remembered for the last ls."""
         key = np.asarray(ls, dtype=float).tobytes()
-        if key == getattr(self, "_hess_key", None):
+        if key == self._hess_key:
             return self._hess
         like = self.like
         nb = like.starts.size
@@ -180,12 +185,7 @@ class LinearModel:
             wt = like.nu + like.counts
             t1 = 2 * np.einsum("b,bil,jblik->jk", wt, K, MT[1:, :, :, :, 1:]).real
             t2 = np.einsum("b,jbil,kbli->jk", wt, KD, KD).real
-            theta = self.x0[:self.post.p]
-            h = 1e-6
-            up, dn = theta.copy(), theta.copy()
-            up[self.cols] += h
-            dn[self.cols] -= h
-            prior = -(prior_gradient(self.post, up) - prior_gradient(self.post, dn)) / (2 * h)
+            prior = log_prior_curvature(self.post.priors.priors, self.x0[:self.post.p])
             H = t1 - t2 + np.diag(prior[self.cols])
         self._hess_key, self._hess = key, H
         return H
@@ -196,7 +196,7 @@ class LinearModel:
         differences (step eps) of the analytic gradient, symmetrised. Remembered for the
         last ls."""
         key = np.asarray(ls, dtype=float).tobytes()
-        if key == getattr(self, "_full_key", None):
+        if key == self._full_key:
             return self._full
         q = self.cols.size
         H = np.zeros((q + 3, q + 3))
@@ -255,12 +255,18 @@ def linearise(post: LogPosterior, x: NDArray, cols: NDArray, step: float = _STEP
     return LinearModel(post, np.asarray(x, dtype=float).copy(), cols, MT)
 
 
+def _model_hessian(lin: LinearModel, ls: NDArray, noise: bool) -> NDArray:
+    """-d2 m over the linear model's free coordinates: the parameters (hessian), and the
+    noise intensities after them when they are free (hessian_with_noise)."""
+    return lin.hessian_with_noise(ls) if noise else lin.hessian(ls)
+
+
 def _curvature_scales(lin: LinearModel, ls: NDArray, noise: bool, width: NDArray
                       ) -> NDArray:
     """1/sqrt(-d2 m / dv_j2) per free coordinate of the linear model (the diagonal of
     LinearModel.hessian, or of hessian_with_noise with the noise intensities), the prior
     width where the curvature is not usable."""
-    out = np.diag(lin.hessian_with_noise(ls) if noise else lin.hessian(ls)).copy()
+    out = np.diag(_model_hessian(lin, ls, noise)).copy()
     ok = np.isfinite(out) & (out > 0)
     return np.clip(np.where(ok, 1.0 / np.sqrt(np.where(ok, out, 1.0)), width), 1e-12, width)
 
@@ -276,13 +282,21 @@ def _maximise_model(lin: LinearModel, ls0: NDArray, noise: bool, lo: NDArray, hi
         v = u * scale
         return v[:q], (ls0 + v[q:] if noise else ls0)
 
+    last: dict[bytes, tuple[float, NDArray]] = {}
+
     def fun(u: NDArray) -> tuple[float, NDArray]:
-        delta, ls = split(u)
-        f, gd, gl = lin.value_grad(delta, ls)
-        if not np.isfinite(f):
-            return 1e300, np.zeros_like(u)
-        g = np.concatenate([gd, gl]) if noise else gd
-        return -(f - f0), -g * scale
+        # remembered for the last u: L-BFGS-B's first call is at the Newton start, which
+        # _newton_start has just evaluated
+        key = np.asarray(u, dtype=float).tobytes()
+        if key not in last:
+            delta, ls = split(u)
+            f, gd, gl = lin.value_grad(delta, ls)
+            g = np.concatenate([gd, gl]) if noise else gd
+            last.clear()
+            last[key] = ((1e300, np.zeros_like(u)) if not np.isfinite(f)
+                         else (-(f - f0), -g * scale))
+        f_u, g_u = last[key]
+        return f_u, g_u.copy()
 
     bounds = list(zip(lo / scale, hi / scale, strict=True))
     g0 = np.concatenate([gd0, gl0]) if noise else gd0
@@ -303,7 +317,7 @@ def _newton_start(lin: LinearModel, ls0: NDArray, noise: bool, g0: NDArray, lo: 
     linear model is close to quadratic, so from there L-BFGS-B needs a few steps where
     from the point it learns the coordinates' correlations first."""
     u0 = np.zeros(scale.size)
-    H = lin.hessian_with_noise(ls0) if noise else lin.hessian(ls0)
+    H = _model_hessian(lin, ls0, noise)
     if not (np.all(np.isfinite(H)) and np.all(np.isfinite(g0))):
         return u0
     try:
