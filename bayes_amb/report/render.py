@@ -23,13 +23,14 @@ from typing import Any
 
 from bayes_amb import __version__
 from bayes_amb.control.robustness import iso14839_zone
+from bayes_amb.discrepancy.story import closest_clause, closest_unnamed
 from bayes_amb.io.atomic import atomic_path, write_text_atomic
 from bayes_amb.report import sections as sc
 from bayes_amb.report.collect import ReportError, RunData
 from bayes_amb.report.derived import derive
 from bayes_amb.report.discrepancy import discrepancy_section
 from bayes_amb.report.sections import SECTION_TITLES, ReportOptions, Section, g, gsd
-from bayes_amb.results.diagnosis import Coefficient, Diagnosis, Unexplained
+from bayes_amb.results.diagnosis import Coefficient, Diagnosis
 from bayes_amb.results.identification import Posterior
 from bayes_amb.rig import CHANNELS
 from bayes_amb.threads import limited_threads
@@ -255,17 +256,22 @@ def _flags(run: RunData, dg: Diagnosis, truth: dict[str, float]) -> list[str]:
     return out
 
 
-def _unexplained(un: Unexplained) -> str:
-    """One clause for the diagnosis's unexplained structure; "" when nothing is left."""
+def _unexplained(dg: Diagnosis) -> str:
+    """One clause for the diagnosis's unexplained structure, with the candidate that came
+    closest to being named (story.closest_unnamed); "" when nothing is left."""
+    un = dg.unexplained
     if not un.present:
         return ""
+    near = closest_unnamed(dg)
     bands = un.bands_hz
     where = ", ".join(f"{g(lo)}–{g(hi)}" for lo, hi in bands[:4])
     where = (f" in {where}" + (f" and {len(bands) - 4} more bands" if len(bands) > 4 else "")
              + " Hz") if bands else ""
     channels = ", ".join(un.channels) or "?"
     return (f"structure coherent with the excitation on channel(s) {channels}{where} that "
-            "no model in the library explains")
+            "no model in the library explains" + (
+                "" if near is None else
+                f" with the evidence to be named (closest: {closest_clause(near)})"))
 
 
 def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
@@ -317,7 +323,7 @@ def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
             bullets.append("Model discrepancy: " + ("a mismatch was located but no missing "
                            "physics named" if dg.mismatch.detected
                            else "no mismatch found") + " (see Model discrepancy).")
-    unexplained = _unexplained(dg.unexplained) if dg is not None else ""
+    unexplained = _unexplained(dg) if dg is not None else ""
     if unexplained:
         bullets.append("The diagnosis leaves part of the mismatch unexplained: "
                        + unexplained + " (see Model discrepancy).")
