@@ -83,7 +83,7 @@ def write_records(run: Path, kinds: dict[str, int], duration: float) -> None:
 
 
 def identify_all(run: Path, kinds: dict[str, int], out: str, map_only: bool, shard: int,
-                 n_shards: int, diagnose: bool = False, learned: bool = False) -> None:
+                 n_shards: int, diagnose: bool = False) -> None:
     """identify (or with ``diagnose``, diagnose: its verdict, names and the coefficients
     after, as ``parameters``) of every record, into RUN/OUT/NAME.json."""
     from bayes_amb.inference.identify import IdentifyOptions, identify
@@ -98,9 +98,8 @@ def identify_all(run: Path, kinds: dict[str, int], out: str, map_only: bool, sha
         t0 = time.perf_counter()
         rec = load_recording(run / "recordings" / f"{name}.csv")
         if diagnose:
-            from bayes_amb.discrepancy.diagnose import DiagnoseOptions
             from bayes_amb.discrepancy.diagnose import diagnose as run_diagnose
-            dg = run_diagnose(rec, options=DiagnoseOptions(learned_spectrum=learned)).to_dict()
+            dg = run_diagnose(rec).to_dict()
             d = {"verdict": dg["verdict"], "parameters": dg["parameters_after"],
                  "explanations": [f"{e['effect']}@{e['location']}"
                                   for e in dg["explanations"]]}
@@ -169,8 +168,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--map-only", action="store_true")
     ap.add_argument("--diagnose", action="store_true",
                     help="diagnose instead of identify (verdicts scored too)")
-    ap.add_argument("--learned-spectrum", action="store_true",
-                    help="with --diagnose: its posteriors under the learned noise spectrum")
     ap.add_argument("--shard", default="0/1")
     ap.add_argument("--write-only", action="store_true")
     ap.add_argument("--score-only", action="store_true")
@@ -181,8 +178,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     if not a.score_only:
         shard, n_shards = (int(v) for v in a.shard.split("/"))
-        identify_all(a.run, kinds, a.out, a.map_only, shard, n_shards, a.diagnose,
-                     a.learned_spectrum)
+        identify_all(a.run, kinds, a.out, a.map_only, shard, n_shards, a.diagnose)
     table = score(a.run, kinds, a.out)
     print(f"{'kind':28s} {'records':>7s} {'coverage':>14s} {'width k':>9s} {'width c':>9s} "
           f"{'/oracle':>8s} {'wall s':>7s}")

@@ -163,28 +163,3 @@ def test_identifys_adequacy_fit_leaves_the_line_out_and_the_diagnosis_keeps_it(l
         assert like.counts.sum() == like.k.size
         assert np.allclose(like.nu, like.prior_weight * like.counts + P_CH + 1.0)
         assert np.isfinite(fm.log_post)
-
-
-def test_the_diagnosis_reports_under_the_learned_spectrum_only_where_asked_and_coloured():
-    """fitting.own_spectrum_fit (DiagnoseOptions.learned_spectrum): on the low-pass force
-    record the diagnosis' nominal fit refitted under the spectrum learned from its
-    residual has a spectrum, k_By's sd narrower than under the white sources (the force's
-    band no longer sets the noise everywhere), and the fit it was given is left as it was;
-    on a white record (no force) the fit itself comes back."""
-    from bayes_amb.discrepancy.adequacy import nominal_assessment
-    from bayes_amb.discrepancy.fitting import own_spectrum_fit
-
-    names = ("k_By", "c_By")
-    _, fm, _ = nominal_assessment(_low_pass_record(), names)
-    x0, cov0 = fm.x.copy(), fm.cov.copy()
-    learned = own_spectrum_fit(fm)
-    assert learned is not fm and learned.like.spectrum is not None
-    assert fm.like.spectrum is None and np.array_equal(fm.x, x0)
-    assert np.array_equal(fm.cov, cov0)
-    assert np.sqrt(learned.cov[0, 0]) < 0.8 * np.sqrt(cov0[0, 0])
-    rig = load_rig()
-    ctrl = export_controller(reference_controller(rig, 1e-4), rig)
-    white, _ = design_recording(rig, ctrl, Design(duration=1.0, amplitude=1.0),
-                                Noise(noise_rms=2e-8, r2_rms=0.0), seed=3)
-    _, fw, _ = nominal_assessment(white, names)
-    assert own_spectrum_fit(fw) is fw

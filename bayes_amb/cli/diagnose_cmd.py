@@ -69,11 +69,6 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
                    help="emcee posteriors of the nominal and final models (default: Laplace)")
     p.add_argument("--steps", type=integer(10), default=2000, metavar="N",
                    help="emcee steps with --sample, >= 10 (default 2000)")
-    p.add_argument("--learned-spectrum", action="store_true",
-                   help="report the posteriors under the noise spectrum learned from each "
-                        "model's residual where it is coloured, as identify does (the "
-                        "models are compared under the white sources either way; default: "
-                        "the white sources, each band's spectrum integrated out)")
     p.add_argument("--seed", type=seed, default=0, help="seed, 0..4294967295 (default 0)")
     p.add_argument("--out", required=True, metavar="DIR",
                    help="folder for diagnosis.json, residuals.nc and models/ (required)")
@@ -178,8 +173,7 @@ def run(args: argparse.Namespace) -> int:
 
     opt = DiagnoseOptions(
         log_bf_threshold=args.threshold, max_effects=args.max_effects, candidates=cands,
-        sample=args.sample, steps=args.steps, seed=args.seed, progress=say, planes=planes,
-        learned_spectrum=args.learned_spectrum)
+        sample=args.sample, steps=args.steps, seed=args.seed, progress=say, planes=planes)
     if len(recs) > 1:
         return _run_records(args, recs, priors, opt)
     d = diagnose(rec, args.params, priors, opt)

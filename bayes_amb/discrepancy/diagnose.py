@@ -43,7 +43,7 @@ from bayes_amb.discrepancy.fitstats import (
     residual_spectrum,
     theta_summary,
 )
-from bayes_amb.discrepancy.fitting import FittedModel, own_noise_fit, own_spectrum_fit
+from bayes_amb.discrepancy.fitting import FittedModel, own_noise_fit
 from bayes_amb.discrepancy.library import (
     BEARING_COEFFICIENTS,
     Candidate,
@@ -86,11 +86,7 @@ class DiagnoseOptions:
     nominal and the final model; otherwise their posteriors are Laplace approximations),
     steps per sampled model, seed, progress callback(text), planes (the two correction
     planes of the balancing answer when unbalance is named: discs, bearings or nodes
-    'n<j>'; default the two discs furthest apart, balancing.py). learned_spectrum: report
-    the nominal and the final model's posteriors under the noise spectrum learned from
-    each one's residual (fitting.own_spectrum_fit, identify's noise model) where it is
-    coloured; the search compares the models under the white sources either way. Off by
-    default until measured on every foreign family (docs/diagnose.md)."""
+    'n<j>'; default the two discs furthest apart, balancing.py)."""
 
     log_bf_threshold: float = 3.0
     max_effects: int = 4
@@ -101,7 +97,6 @@ class DiagnoseOptions:
     seed: int = 0
     progress: Callable[[str], None] | None = None
     planes: tuple[str, str] | None = None
-    learned_spectrum: bool = False
 
 
 def residuals_dataset(loc: Location, eps: np.ndarray, residual_before: np.ndarray,
@@ -176,15 +171,12 @@ def _model_error_dict(fm: FittedModel) -> dict[str, Any] | None:
 
 
 def _after_from(named: FittedModel, reported: FittedModel, mixed: bool,
-                alt_weight: float | None = None, direct: bool = False) -> str:
-    """How parameters_after was obtained (direct_terms.py, own_spectrum_fit), in one
-    line."""
+                alt_weight: float | None = None) -> str:
+    """How parameters_after was obtained (direct_terms.py), in one line."""
     parts = ["the named model" if named.candidates else "the nominal model"]
-    if direct:
+    if reported is not named:
         parts.append("with the direct stiffness and damping of its node forces fitted beside "
                      "them (" + ", ".join(c.location for c in direct_companions(named)) + ")")
-    if reported.like.spectrum is not None:
-        parts.append("under the noise spectrum learned from its residual")
     parts.append("its model error integrated out")
     if mixed:
         parts.append("averaged with the nominal model in equal parts, since the naming is "
@@ -333,20 +325,13 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     else:
         final_loc = loc
     unexplained = unexplained_block(final_loc, sel.final)
-    fitted = with_direct_terms(sel.final, priors)
-    direct_fitted = fitted is not sel.final
-    _carry_modelled_spread(nominal, fitted)
-    if direct_fitted:
+    reported = with_direct_terms(sel.final, priors)
+    _carry_modelled_spread(nominal, reported)
+    if reported is not sel.final:
         say("fitting the direct stiffness and damping beside the cross-coupling at "
             + ", ".join(c.location for c in direct_companions(sel.final)))
-    # the posteriors reported, before and after, under the noise spectrum each one's
-    # residual shows (own_spectrum_fit; the search compared the models under the white
-    # sources)
-    learn = own_spectrum_fit if opt.learned_spectrum else (lambda fm: fm)
-    shown = learn(nominal)
-    reported = shown if fitted is nominal else learn(fitted)
     if opt.sample:
-        for i, fm in enumerate({id(m): m for m in (shown, reported)}.values()):
+        for i, fm in enumerate({id(m): m for m in (nominal, reported)}.values()):
             say(f"sampling the posterior of model {i + 1}")
             _sample(fm, opt.steps, opt.seed + i)
     after = fit_quality(sel.final, eps)
@@ -354,12 +339,12 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
     adequacy_after = judge(checks, final_loc, max(after["nrmse"].values()),
                            advice=FINAL_ADVICE)
     say("integrating the model error out of the posteriors")
-    doubted = {id(shown): not adequacy.adequate,        # (one model: the final verdict)
+    doubted = {id(nominal): not adequacy.adequate,      # (one model: the final verdict)
                id(reported): not adequacy_after.adequate}
-    for fm in {id(m): m for m in (shown, reported)}.values():
+    for fm in {id(m): m for m in (nominal, reported)}.values():
         fm.model_error = model_error(fm.like, fm.x, fm.p, fm.cov, fm.names,
                                      robust=doubted[id(fm)])
-    s_nom, s_fin = draws(shown, seed=opt.seed), draws(reported, seed=opt.seed)
+    s_nom, s_fin = draws(nominal, seed=opt.seed), draws(reported, seed=opt.seed)
     # the nominal model's own candidates (a modelled current loop's lag) come first
     all_effects = effect_summaries(reported, s_fin)[len(nominal.candidates):]
     effects, direct = all_effects[:len(sel.accepted)], all_effects[len(sel.accepted):]
@@ -418,17 +403,16 @@ def diagnose(recording: Recording, params: str | tuple[str, ...] | list[str] | N
         "fit": {"before": {k: before[k] for k in ("nrmse", "whiteness_p")},
                 "after": {k: after[k] for k in ("nrmse", "whiteness_p")},
                 "log_likelihood_gain": float(sel.final.log_post - nominal.log_post)},
-        "parameters_before": theta_summary(shown, s_nom),
+        "parameters_before": theta_summary(nominal, s_nom),
         "parameters_after": theta_summary(reported, s_coef),
         "parameters_after_from": _after_from(sel.final, reported, with_nominal,
-                                             None if alt is None else alt.weight,
-                                             direct_fitted),
+                                             None if alt is None else alt.weight),
         "direct_terms": direct,
         "nonlinearity": nonlinearity_block(
             next(c for c in checks.checks if c.name == "linearity").values,
             recording.rig, checks.u, recording.dt, theta_summary(reported, s_coef),
             recording.u),
-        "model_error": {"before": _model_error_dict(shown),
+        "model_error": {"before": _model_error_dict(nominal),
                         "after": _model_error_dict(reported)},
         "criterion": ("Laplace Bayes factor on the noise-marginalised whole-band Whittle "
                       "likelihood; prior odds 1/K for each of the K candidates of a round; "

@@ -201,23 +201,6 @@ def with_learned_noise(fm: FittedModel) -> FittedModel:
     return replace(fm, x=x, log_post=log_post, cov=free_covariance(post, x))
 
 
-def own_spectrum_fit(fm: FittedModel) -> FittedModel:
-    """The reported model refitted under the noise spectrum learned from its own residual
-    (with_learned_noise, on a copy of its likelihood: ``fm`` itself is left as it is), where
-    that residual is not as white as the sources have it; ``fm`` where it is.
-
-    The models of the search are compared under the white sources with each band's
-    spectrum integrated out (RobustWhittle): compared under learned spectra, a band-limited
-    force's records named a sensor gain and two runouts with confidence (nominal_assessment).
-    The chosen model's intervals are another matter: under the white sources the loudest
-    band of a coloured disturbance sets the noise everywhere, and the bands it leaves alone
-    lose their information (identify's reason for the learned spectrum, docs/identify.md)."""
-    like = copy.copy(fm.like)
-    trial = replace(fm, like=like, post=LogPosterior(like, fm.forward.priors))
-    out = with_learned_noise(trial)
-    return fm if like.spectrum is None else out
-
-
 def _embed(parent: FittedModel, fwd: ExtendedForwardModel, phi: dict[str, float] | None = None
            ) -> NDArray:
     """The parent's MAP in the child's layout; the child's new parameters at their null."""
