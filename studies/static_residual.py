@@ -1,0 +1,77 @@
+"""Does the truncated modes' static compliance belong in the model identify fits on a
+flexible rotor?  On ROSS's real test rig the reduced model keeps the rigid-body modes and
+bending pair 1 (12 states, valid to 193 Hz), and identify's own intervals undercover.
+
+For each record of RUN (written by ``python -m benchmarks.foreign.ross_rig``, a generator
+apart from the tool), the eight bearing coefficients are fitted in identify's band (the
+reduced model's validity band) twice, with the diagnosis' likelihood and search
+(discrepancy/fitting.py): the nominal model, and the nominal model plus the residual
+flexibility of the modes it leaves out held at the FE value (the library's
+``residual_flexibility`` with its scale's prior narrowed to normal(1, 0.01)). Printed per
+record: the log posterior of each and each coefficient's z = (MAP - truth) / Laplace sd.
+The truth is read only to score, after the fits.
+
+    PYTHONPATH=. python studies/static_residual.py runs/rr57l/control_00*.csv
+
+A study of a question, not a feature: the model identify uses is unchanged by it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+COEFFICIENTS = ("k_Ax", "k_Ay", "k_Bx", "k_By", "c_Ax", "c_Ay", "c_Bx", "c_By")
+
+
+def in_band_fit(rec, eps, start, candidates, priors):
+    """MAP, Laplace covariance and log posterior of the model with ``candidates`` over the
+    bins up to the nominal model's validity band."""
+    from bayes_amb.discrepancy.fitting import build, free_covariance, local_fit, nominal_map
+
+    fwd, like, post = build(rec, COEFFICIENTS, eps, candidates, priors, start)
+    f_max = fwd.validity_band_hz()
+    like._set_bins(like.k[like.k / (like.n * fwd.dt) <= f_max])
+    like._apply_prefilter()
+    like._fused = None
+    like.set_noise_reference(like.theta_ref)
+    x = nominal_map(post)
+    like.fixed_filters = like.phi_sources
+    x, log_post = local_fit(post, x)
+    return x, free_covariance(post, x), log_post
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("records", nargs="+", type=Path, help="NAME.csv of a ross_rig run")
+    a = ap.parse_args(argv)
+    from bayes_amb.discrepancy.adequacy import nominal_assessment
+    from bayes_amb.discrepancy.library.registry import make_candidate
+    from bayes_amb.inference.priors import Prior
+    from bayes_amb.io.recording import load_recording
+
+    models = (("nominal", (), None),
+              ("with the static residual", (make_candidate("residual_flexibility"),),
+               {"residual_scale": Prior("normal", 1.0, 0.01)}))
+    for csv in a.records:
+        rec = load_recording(csv)
+        checks, _, eps = nominal_assessment(rec, COEFFICIENTS)
+        fits = [(label, *in_band_fit(rec, eps, checks.start, cands, pri))
+                for label, cands, pri in models]
+        truth = json.loads(csv.with_suffix(".json").read_text())["truth"]["theta"]
+        t = np.array([truth[n] for n in COEFFICIENTS])
+        parts = []
+        for label, x, cov, log_post in fits:
+            sd = (np.sqrt(np.diag(cov)[:8]) if cov is not None else np.full(8, np.nan))
+            z = (x[:8] - t) / sd
+            parts.append(f"{label}: log post {log_post:.1f}, z "
+                         + " ".join(f"{v:+.1f}" for v in z))
+        print(csv.stem, " | ".join(parts), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
