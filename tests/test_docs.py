@@ -84,3 +84,15 @@ def test_the_home_page_is_the_readme_and_the_readme_is_short():
         target = m.group(2).split("#")[0]
         assert "://" in target or (DOCS / target).exists(), target
     assert not re.search(r"\bissue \d+", readme, flags=re.I)      # no history in the README
+
+
+@pytest.mark.parametrize("page", _pages(), ids=lambda p: p.name)
+def test_no_inline_command_is_continued_by_a_backslash(page):
+    """An inline `...` span that breaks its line with a backslash is not a command a
+    reader can paste (nor tools/run_guide_commands.py run): the escaped line end became
+    an escaped space, and runs/nl59's --kinds lost its third kind that way. Such a
+    command belongs in a code block."""
+    text = re.sub(r"```.*?```", "", page.read_text(encoding="utf-8"), flags=re.S)
+    spans = text.split("`")[1::2]
+    broken = [s[:80] for s in spans if "\\\n" in s]
+    assert not broken, f"{page.name}: {broken}"
