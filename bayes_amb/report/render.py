@@ -271,7 +271,7 @@ def _unexplained(dg: Diagnosis) -> str:
     return (f"structure coherent with the excitation on channel(s) {channels}{where} that "
             "no model in the library explains" + (
                 "" if near is None else
-                f" with the evidence to be named (closest: {closest_clause(near)})"))
+                f" with the evidence to be named; the closest is {closest_clause(near)}"))
 
 
 def summary_section(run: RunData, facts: dict[str, Any]) -> Section:
