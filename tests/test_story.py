@@ -27,7 +27,7 @@ def test_the_closest_unnamed_candidate_is_said_beside_what_is_unexplained():
     text = plain_language(d)
     assert "one comes close, the sensor gain at By (log Bayes factor 2.2" in text
     assert text == d.story
-    from bayes_amb.report.render import _unexplained     # the report's headline clause
+    from bayes_amb.report.render import _unexplained  # the report's headline clause
 
     assert _unexplained(d).endswith("that no model in the library explains with the evidence "
                                     "to be named; the closest is the sensor gain at By (log "
