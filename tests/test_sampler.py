@@ -104,3 +104,33 @@ def test_exact_laplace_decorrelates_theta_within_a_few_steps():
     print(f"theta ESS: differential evolution {ess_de[:P].min():.0f}, Laplace mixture "
           f"{ess_lap[:P].min():.0f}")
     assert ess_lap[:P].min() > 4 * ess_de[:P].max()
+
+
+def test_a_short_run_raises_no_library_warning():
+    """A run whose walkers have not all moved at the first check (a walker started on a
+    target that rejects every move for it: its acf 0/0) and whose walkers outnumber the
+    draws it keeps: emcee's divide warning and ArviZ's chains-over-draws warning stay
+    inside; the run's tau there is NaN, so it is not taken as settled, and the burn-in and
+    thinning are still formed (with a NaN tau a run ended in "cannot convert float NaN to
+    integer", after sampling to the end)."""
+    import warnings
+
+    from bayes_amb.inference.posterior import walkers_datatree
+
+    class Sticky(StandardNormal):
+        """Walker 0 starts at a point where every other point is worse by far."""
+
+        def __call__(self, x):
+            x = np.atleast_2d(x)
+            out = super().__call__(x)
+            return np.where(np.all(x == 0.0, axis=1), 1e6, out)
+
+    rng = np.random.default_rng(3)
+    start = rng.standard_normal((WALKERS, D))
+    start[0] = 0.0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        run = run_emcee(Sticky(), start, rng, n_steps=60)
+        assert np.isnan(run.tau).any()
+        tree = walkers_datatree({"posterior": {"a": run.samples[:, :2, 0]}})
+    assert tree.posterior.sizes["chain"] == WALKERS > tree.posterior.sizes["draw"]

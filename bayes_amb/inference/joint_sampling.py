@@ -19,14 +19,13 @@ from __future__ import annotations
 
 from typing import Any
 
-import arviz as az
 import numpy as np
 import xarray as xr
 from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.estimate import LogPosterior
-from bayes_amb.inference.posterior import identifiability, summarise
+from bayes_amb.inference.posterior import identifiability, summarise, walkers_datatree
 from bayes_amb.inference.priors import PriorSet, noise_log_prior
 from bayes_amb.inference.sampler import (
     SamplerRun,
@@ -133,7 +132,7 @@ def joint_datatree(names: list[str], run: SamplerRun, n_rec: int,
     for r in range(n_rec):
         for k, s in enumerate(NOISE_SOURCES):
             post[f"{s}@{r + 1}"] = 10.0 ** run.samples[:, :, p + 3 * r + k]
-    dt = az.from_dict({"posterior": post, "sample_stats": {"lp": run.log_post}})
+    dt = walkers_datatree({"posterior": post, "sample_stats": {"lp": run.log_post}})
     dt.attrs.update({k: (v if isinstance(v, (str, int, float)) else str(v))
                      for k, v in attrs.items()})
     dt.attrs["tau"] = ",".join(f"{v:.3f}" for v in run.tau)

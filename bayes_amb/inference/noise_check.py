@@ -42,12 +42,11 @@ from __future__ import annotations
 from dataclasses import dataclass, field, replace
 from typing import Any
 
-import arviz as az
 import numpy as np
 from numpy.typing import NDArray
 from scipy import stats
 
-from bayes_amb.inference.posterior import stretch_draws, summarise
+from bayes_amb.inference.posterior import stretch_draws, summarise, walkers_datatree
 from bayes_amb.inference.sampler import SamplerRun
 from bayes_amb.inference.spectrum import kept_counts
 from bayes_amb.inference.whittle import WhittleLikelihood
@@ -388,7 +387,7 @@ def sandwich_rows(check: NoiseCheck, run: SamplerRun, bounds: list[tuple[Any, An
     draws as sampled); also the stretched draws and the check with its sd ratios."""
     names = check.names
     samples, check = sandwich_draws(check, run.samples, bounds)
-    tree = az.from_dict({"posterior": {n: samples[:, :, j] for j, n in enumerate(names)}})
+    tree = walkers_datatree({"posterior": {n: samples[:, :, j] for j, n in enumerate(names)}})
     wide = summarise(tree, names, run.tau, rig)
     rows = {n: {**wide[n], **{k: own[n][k] for k in CHAIN_KEYS}} for n in names}
     return rows, samples, check

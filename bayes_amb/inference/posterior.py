@@ -3,6 +3,7 @@ identifiability statement."""
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any
 
@@ -17,6 +18,17 @@ from bayes_amb.io.atomic import write_netcdf_atomic
 from bayes_amb.rig import Rig
 from bayes_amb.uncertainty import get_spec
 
+CHAINS_OVER_DRAWS = "Found chain dimension to be longer than draw dimension"
+"""ArviZ's warning where the walkers (the chains) outnumber the draws kept: normal for an
+ensemble sampler's short run (``--steps``), not a mislabelled array, so not shown."""
+
+
+def walkers_datatree(data: dict, **kwargs) -> xr.DataTree:
+    """az.from_dict for an ensemble's draws, the walkers as the chains (CHAINS_OVER_DRAWS
+    not raised to the user)."""
+    with warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=CHAINS_OVER_DRAWS, category=UserWarning)
+        return az.from_dict(data, **kwargs)
 
 def pointwise_log_likelihood(like: WhittleLikelihood, samples: NDArray, p: int,
                              batch: int = 256) -> NDArray:
@@ -49,7 +61,7 @@ def to_datatree(names: tuple[str, ...], samples: NDArray, log_post: NDArray,
     dims = {"eps": ["time", "channel"], "x": ["time", "channel"], "t": ["time"],
             "band_freq_hz": ["band"], "band_bins": ["band"]}
     coords = {"channel": ["Ax", "Ay", "Bx", "By"], "time": np.arange(eps.shape[0]), **band}
-    dt = az.from_dict(data, dims=dims, coords=coords)
+    dt = walkers_datatree(data, dims=dims, coords=coords)
     dt["log_likelihood"] = xr.DataTree(xr.Dataset(
         {"eps": (("chain", "draw", "band"), log_lik)},
         coords={"chain": np.arange(log_lik.shape[0]), "draw": np.arange(log_lik.shape[1]),

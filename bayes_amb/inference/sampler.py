@@ -144,9 +144,15 @@ def initial_ball(post: LogPosterior, center: NDArray, cov: NDArray | None, n_wal
 def _burn_thin(tau: NDArray, p: int, total: int) -> tuple[int, int]:
     """Burn-in 2 tau of the slowest coordinate (noise intensities included: a sampler that
     decorrelates theta in a few steps can still carry their start), at most half the chain;
-    thinning by tau_min / 2 of theta."""
-    burn = min(math.ceil(2 * float(np.max(tau))), total // 2)
-    thin = max(1, int(np.min(tau[:p]) / 2)) if p else 1
+    thinning by tau_min / 2 of theta. A coordinate whose tau is not known (NaN: a walker
+    that never moved in it) counts as the slowest, and never sets the thinning; with no
+    tau known, half the chain is burnt and none thinned (before, a run that ended so
+    raised "cannot convert float NaN to integer" after sampling to the end)."""
+    known = tau[np.isfinite(tau)]
+    burn = total // 2 if known.size < tau.size else min(math.ceil(2 * float(known.max())),
+                                                        total // 2)
+    theta = tau[:p][np.isfinite(tau[:p])]
+    thin = max(1, int(np.min(theta) / 2)) if p and theta.size else 1
     return burn, thin
 
 
@@ -197,7 +203,10 @@ def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
         state = sampler.run_mcmc(state, step, progress=False)
         total += step
         chain = sampler.get_chain()
-        tau = emcee.autocorr.integrated_time(chain, tol=0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            # a walker that has not moved yet in a coordinate (its acf 0/0): NaN there,
+            # so the chain is not taken as settled, and no numpy warning reaches the user
+            tau = emcee.autocorr.integrated_time(chain, tol=0)
         tau_max = float(np.max(tau[:post.p])) if post.p else float(np.max(tau))
         if progress is not None:
             progress(total, target, tau_max)
