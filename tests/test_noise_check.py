@@ -175,3 +175,29 @@ def test_sampled_draws_are_stretched_to_the_sandwich_and_keep_the_chains_diagnos
         assert row.sd == pytest.approx(white.sd * check.sd_ratio[n], rel=0.1), n
         assert (row.r_hat, row.ess_bulk, row.tau) == (white.r_hat, white.ess_bulk, white.tau)
     assert any(abs(np.log(r)) > np.log(1.2) for r in check.sd_ratio.values())
+
+
+def test_the_joint_sandwich_takes_a_learned_spectrums_floor_too():
+    """joint_check: a record whose learned spectrum the check does not doubt but floors by
+    its own scores (robust_check: B, F, floor 1) widens the joint covariance where its
+    scores scatter more than its information says, and never narrows it; a record whose
+    noise is as modelled (no B) adds nothing; none widening gives None."""
+    from bayes_amb.inference.noise_check import NoiseCheck, joint_check
+
+    names = ["a", "b@1", "b@2"]
+    F = np.eye(2)
+    robust = NoiseCheck(doubted=False, p_value=0.5, statistic=1.0, dof=2, names=("a", "b"),
+                        F=F, B=4.0 * F, floor=1.0)
+    plain = NoiseCheck(doubted=False, p_value=0.5, statistic=1.0, dof=2, names=("a", "b"))
+    idx = [np.array([0, 1]), np.array([0, 2])]
+    assert joint_check([plain, plain], idx, names) is None
+    check = joint_check([robust, plain], idx, names)
+    assert check is not None and check.floor == 1.0 and not check.doubted
+    assert np.allclose(check.B, np.diag([3.0, 3.0, 0.0]))      # B - F at its places
+    C = np.diag([0.5, 0.5, 0.5])
+    wide, _ = check.sandwich(C)
+    assert np.allclose(np.diag(wide), [0.5 + 0.25 * 3, 0.5 + 0.25 * 3, 0.5])
+    shrink = NoiseCheck(doubted=False, p_value=0.5, statistic=1.0, dof=2, names=("a", "b"),
+                        F=F, B=0.1 * F, floor=1.0)
+    narrow, _ = joint_check([shrink, plain], idx, names).sandwich(C)
+    assert np.allclose(narrow, C)                                # the floor: never narrower

@@ -395,19 +395,24 @@ def sandwich_rows(check: NoiseCheck, run: SamplerRun, bounds: list[tuple[Any, An
 
 def joint_check(checks: list[NoiseCheck | None], idx: list[NDArray],
                 joint_names: list[str]) -> NoiseCheck | None:
-    """The sandwich of a joint posterior: each doubted record's B - F at the joint MAP,
-    placed at its parameters' places in the joint vector (``idx``: record's parameter j is
-    joint parameter idx[r][j]) and summed; records whose noise is as modelled add nothing.
-    None where no record is doubted."""
-    doubted = [(c, ix) for c, ix in zip(checks, idx, strict=True)
-               if c is not None and c.doubted]
-    if not doubted:
+    """The sandwich of a joint posterior: each widening record's B - F at the joint MAP
+    (a doubted white model's, or a learned spectrum's floored by its own scores,
+    robust_check), placed at its parameters' places in the joint vector (``idx``:
+    record's parameter j is joint parameter idx[r][j]) and summed; records whose noise is
+    as modelled add nothing. Never narrower than the joint Laplace covariance where any
+    record is a learned spectrum's (its floor of 1), as identify's single records are.
+    None where no record widens."""
+    used = [(c, ix) for c, ix in zip(checks, idx, strict=True)
+            if c is not None and c.widens]
+    if not used:
         return None
     p = len(joint_names)
     D = np.zeros((p, p))
-    for c, ix in doubted:
+    for c, ix in used:
         D[np.ix_(ix, ix)] += c.B - c.F
-    worst = min((c for c, _ in doubted), key=lambda c: c.p_value)
-    return replace(worst, names=tuple(joint_names), F=np.zeros((p, p)), B=D,
-                   statistic=sum(c.statistic for c, _ in doubted),
-                   dof=sum(c.dof for c, _ in doubted))
+    doubted = [c for c, _ in used if c.doubted]
+    base = min(doubted, key=lambda c: c.p_value) if doubted else used[0][0]
+    return replace(base, names=tuple(joint_names), F=np.zeros((p, p)), B=D,
+                   statistic=sum(c.statistic for c, _ in used),
+                   dof=sum(c.dof for c, _ in used),
+                   floor=max(c.floor for c, _ in used))
