@@ -172,8 +172,9 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
     checks = [_record_check(like, z[ix], ls, names)
               for like, ls, ix in zip(likes, sigmas, idx, strict=True)]
     summary["records"] = [replace(block, noise_check=None if c is None else NoiseCheckBlock(
-        **{**c.to_dict(), "line": c.finding + (": its B - F enters the joint sandwich."
-                                               if c.doubted else ".")}))
+        **{**c.to_dict(), "line": c.finding + (
+            ": its B - F enters the joint sandwich." if c.doubted else
+            ": its learned spectrum's scores floor the joint sandwich." if c.widens else ".")}))
         for block, c in zip(summary["records"], checks, strict=True)]
     check = joint_check(checks, idx, joint_names)
     if check is not None and cov is not None:
