@@ -33,11 +33,7 @@ def in_band_fit(rec, eps, start, candidates, priors):
     from bayes_amb.discrepancy.fitting import build, free_covariance, local_fit, nominal_map
 
     fwd, like, post = build(rec, COEFFICIENTS, eps, candidates, priors, start)
-    f_max = fwd.validity_band_hz()
-    like._set_bins(like.k[like.k / (like.n * fwd.dt) <= f_max])
-    like._apply_prefilter()
-    like._fused = None
-    like.set_noise_reference(like.theta_ref)
+    like.limit_band(fwd.validity_band_hz())
     x = nominal_map(post)
     like.fixed_filters = like.phi_sources
     x, log_post = local_fit(post, x)

@@ -42,8 +42,7 @@ from bayes_amb.inference.forward import ForwardModel
 from bayes_amb.inference.noise_check import (
     CHAIN_KEYS,
     NoiseCheck,
-    noise_check,
-    robust_check,
+    record_check,
     sandwich_rows,
 )
 from bayes_amb.inference.noise_fit import fit_noise_spectrum
@@ -443,11 +442,8 @@ def _sampled(post: LogPosterior, x_map: np.ndarray, cov: np.ndarray | None,
 def _checked(like: WhittleLikelihood, m: MapResult, names: tuple[str, ...],
              spectrum: LearnedSpectrum | None) -> NoiseCheck | None:
     """The noise check at the MAP; with a learned spectrum that it does not doubt, its
-    intervals floored by the record's own scores (noise_check.robust_check)."""
-    check = noise_check(like, m.theta, m.log10_sigma, names)
-    if check is not None and not check.doubted and spectrum is not None:
-        check = robust_check(like, m.theta, m.log10_sigma, check)
-    return check
+    intervals floored by the record's own scores (noise_check.record_check)."""
+    return record_check(like, m.theta, m.log10_sigma, names, spectrum is not None)
 
 
 def _warn_bound(summary: dict[str, Any], post: LogPosterior, x_map: np.ndarray,

@@ -49,8 +49,7 @@ from bayes_amb.inference.joint_sampling import JointLogPosterior, sample_joint, 
 from bayes_amb.inference.noise_check import (
     NoiseCheck,
     joint_check,
-    noise_check,
-    robust_check,
+    record_check,
     sandwich_rows,
 )
 from bayes_amb.inference.priors import Prior, PriorSet
@@ -82,19 +81,6 @@ def _layout(names: tuple[str, ...], per_record: tuple[str, ...], n_rec: int
     idx = [np.array([joint.index(record_name(n, r) if n in per_record else n)
                      for n in names]) for r in range(n_rec)]
     return joint, idx
-
-
-def _record_check(like: Any, theta: NDArray, log10_sigma: NDArray,
-                  names: tuple[str, ...]) -> NoiseCheck | None:
-    """One record's noise check at the joint MAP: where its spectrum was learned and the
-    check does not doubt it, floored by the record's own scores (robust_check), as
-    identify's single-record intervals are. Without the floor, on the foreign generator's
-    three-speed controls (studies/joint_foreign.py, twelve groups) the joint intervals
-    covered 82/96 with k_Ax's z at an rms of 1.65, where each record's own covered 257/288."""
-    check = noise_check(like, theta, log10_sigma, names)
-    if check is not None and not check.doubted and like.spectrum is not None:
-        check = robust_check(like, theta, log10_sigma, check)
-    return check
 
 
 def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | list[str],
@@ -167,9 +153,8 @@ def identify_joint(recordings: list[Recording], params: str | tuple[str, ...] | 
         "converged": bool(res.success and cov is not None),
         "seed": opt.seed,
     }
-    # each record's check at the joint MAP, with a learned spectrum's floored by its own
-    # scores as identify's single record has it (identify._checked)
-    checks = [_record_check(like, z[ix], ls, names)
+    # each record's check at the joint MAP, a learned spectrum's floored by its own scores
+    checks = [record_check(like, z[ix], ls, names, like.spectrum is not None)
               for like, ls, ix in zip(likes, sigmas, idx, strict=True)]
     summary["records"] = [replace(block, noise_check=None if c is None else NoiseCheckBlock(
         **{**c.to_dict(), "line": c.finding + (

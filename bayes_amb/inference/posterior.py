@@ -30,6 +30,7 @@ def walkers_datatree(data: dict, **kwargs) -> xr.DataTree:
         warnings.filterwarnings("ignore", message=CHAINS_OVER_DRAWS, category=UserWarning)
         return az.from_dict(data, **kwargs)
 
+
 def pointwise_log_likelihood(like: WhittleLikelihood, samples: NDArray, p: int,
                              batch: int = 256) -> NDArray:
     """Per-band log-likelihood for every retained draw: (n_walkers, n_draws, n_bands)."""

@@ -130,13 +130,23 @@ class WhittleLikelihood(RowMemory):
         found = find_narrow_lines(R[0], self.X, self.k / (self.n * self.forward.dt), speed)
         self.lines_left_out = found
         if found.drop.any():
-            self._set_bins(self.k[~found.drop])
-            self._apply_prefilter()
-            self._fused = None
-            if getattr(self, "_row_sums", None) is not None:
-                self.remember_rows(self._row_capacity)
-            self.set_noise_reference(self.theta_ref)
+            self._rebin(self.k[~found.drop])
         return found
+
+    def limit_band(self, f_max_hz: float) -> None:
+        """Keep only the bins up to f_max_hz (a likelihood built over the whole band, read
+        over a model's validity band as identify's is; studies/static_residual.py)."""
+        self._rebin(self.k[self.k / (self.n * self.forward.dt) <= f_max_hz])
+
+    def _rebin(self, k: NDArray) -> None:
+        """The likelihood over the bins k from here on: bands, filtered DFTs, the fused
+        path's and the remembered rows' state, and the noise filters at the reference."""
+        self._set_bins(k)
+        self._apply_prefilter()
+        self._fused = None
+        if getattr(self, "_row_sums", None) is not None:
+            self.remember_rows(self._row_capacity)
+        self.set_noise_reference(self.theta_ref)
 
     def _band_starts(self, k: NDArray, n: int, n_bands: int) -> NDArray:
         """Index of each band's first bin (band_edges; the diagnosis' likelihood widens
