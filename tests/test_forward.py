@@ -209,8 +209,8 @@ def test_log_likelihood_is_minus_inf_where_controller_does_not_stabilise(rig, ki
     ctrl = rec.controller
     K = (ctrl.A, ctrl.B[:, :4], ctrl.C[:4], ctrl.D[:4, :4])
     th = np.array([[0.3], [theta_bad]])
-    Ap, Bp = like.forward.plants(th)
-    rho = [loop_spectral_radius(Ap[i], Bp[i], like.forward.plant.C, K) for i in range(2)]
+    Ap, Bp, Cp = like.forward.plants(th)
+    rho = [loop_spectral_radius(Ap[i], Bp[i], Cp, K) for i in range(2)]
     assert rho[0] < 1.0 <= rho[1]                     # reference: theta_bad is not stabilised
     ls = np.tile(LOG10_SIGMA, (2, 1))
     ll = like(th, ls)

@@ -8,6 +8,8 @@ rows is built as
     A   = A0 + B_w Theta C_z        (LFT, eqs. 51-52; cross-coupling adds kxy_* columns)
     (A, B, C) -> continuous hooks   (actuator and sensor dynamics add states, ki gain)
     sampled exactly (ZOH, or a candidate's own sampling: fractional delay line)
+    + the static path of the modes left out, where the nominal model holds one
+      (ForwardModel.static; for the pairs this model keeps, scaled by residual_flexibility)
     (Ad, Bd, Cd) -> discrete hooks  (sensor gain)
     + synchronous lines             (unbalance force, runout on the measurement)
 
@@ -24,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.discrepancy.library import Candidate, EffectParam, ModelContext
-from bayes_amb.inference.batched import expm_batched, zoh_batched
+from bayes_amb.inference.batched import expm_batched, lumped_mode, with_static, zoh_batched
 from bayes_amb.inference.forward import ForwardModel, ModalBatch, diagonalise
 from bayes_amb.inference.loop_model import loop_matrices
 from bayes_amb.inference.priors import Prior, PriorSet, default_prior
@@ -34,6 +36,7 @@ from bayes_amb.reduction.pseudo_modal import (
     N_RIGID,
     ReducedModel,
     keep_bending_pairs,
+    residual_corner,
     residual_static,
 )
 from bayes_amb.uncertainty import lft_reduced, parse_param_list
@@ -60,7 +63,7 @@ class ExtendedForwardModel(ForwardModel):
     """
 
     _SHARED = ("recording", "port", "x", "reduced", "dt", "nominal", "parts", "ctx", "_bases",
-               "_statics", "engine", "fixed")
+               "_statics", "engine", "fixed", "static", "observer_ok")
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
                  candidates: tuple[Candidate, ...] = (),
@@ -77,14 +80,14 @@ class ExtendedForwardModel(ForwardModel):
             self._bases: dict[tuple[int, ...], ReducedModel] = {
                 tuple(range(1, self.reduced.n_bending + 1)): self.reduced}
             # the truncated modes' static compliance per set of kept pairs
-            self._statics: dict[tuple[int, ...], np.ndarray] = {}
+            self._statics: dict[tuple[int, ...], tuple] = {}
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
             if self.observer_form:
                 self.F, self.L = template.F, template.L
         else:
-            self.observer_form = self.fast
+            self.observer_form = self.observer_ok
         self.fast = False
         self.candidates = tuple(candidates)
         self.theta_names = self.params
@@ -100,8 +103,14 @@ class ExtendedForwardModel(ForwardModel):
         self._first = [N_RIGID + 4 * pairs.index(c.bending_pairs()[0]) if c.bending_pairs()
                        else N_RIGID for c in self.candidates]
         if pairs not in self._statics:
-            self._statics[pairs] = residual_static(self.reduced.full, pairs)
-        self.ctx = replace(self.ctx, kept_pairs=pairs, static_residual=self._statics[pairs])
+            full = self.reduced.full
+            self._statics[pairs] = (residual_static(full, pairs),
+                                    lumped_mode(*residual_corner(full, pairs), self.dt))
+        static, self._static_path = self._statics[pairs]
+        # the nominal model's static path (ForwardModel.static) follows the pairs this model
+        # keeps, so that a pair a candidate adds is not counted twice
+        self.ctx = replace(self.ctx, kept_pairs=pairs, static_residual=static,
+                           static_in_nominal=self.static is not None)
         lft_names = list(self.theta_names)
         for c in self.candidates:
             lft_names += [n for n in c.lft_names() if n not in lft_names]
@@ -120,11 +129,14 @@ class ExtendedForwardModel(ForwardModel):
         pri = dict(priors or {})
         self.priors = PriorSet(self.params, tuple(
             [pri.get(n, default_prior(n)) for n in self.theta_names]
-            + [e.prior for e in eff]))
+            + [pri.get(e.name, e.prior) for e in eff]))
         self.null = np.array([0.0] * len(self.theta_names) + [e.null for e in eff])
         self.line_candidates = tuple(c for c in self.candidates
                                      if c.line_force(self.ctx) is not None
                                      or c.line_output(self.ctx) is not None)
+        # the candidate that scales the nominal static path, if any
+        self._static_scale = next((i for i, c in enumerate(self.candidates)
+                                   if c.scales_static), None)
 
     # ------------------------------------------------------------------ plants
     def phi(self, P: NDArray, i: int) -> NDArray:
@@ -168,6 +180,11 @@ class ExtendedForwardModel(ForwardModel):
         else:
             Ad, Bd = zoh_batched(A, B, self.dt)
             Cd = C
+        if self.ctx.static_in_nominal:
+            i = self._static_scale
+            g = None if i is None else np.nan_to_num(self.phi(P, i)[:, 0])
+            Ad, Bd, Cd = with_static(Ad, Bd, Cd, self.ctx.static_residual, g,
+                                     self._static_path)
         for i, c in enumerate(self.candidates):
             Ad, Bd, Cd = c.discrete(Ad, Bd, Cd, self.phi(P, i), self.ctx)
         return Ad, Bd, Cd

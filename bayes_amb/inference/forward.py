@@ -22,7 +22,12 @@ from bayes_amb.control.design import design_observer_controller
 from bayes_amb.control.discrete import zoh
 from bayes_amb.errors import RecordingError
 from bayes_amb.inference import kernels
-from bayes_amb.inference.batched import zoh_batched, zoh_compiled
+from bayes_amb.inference.batched import (
+    lumped_mode,
+    with_static,
+    zoh_batched,
+    zoh_compiled,
+)
 from bayes_amb.inference.eigen import final_state, modal_batch
 from bayes_amb.inference.loop_model import (
     LoopParts,
@@ -40,6 +45,7 @@ from bayes_amb.inference.triangular import (
 )
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
+from bayes_amb.reduction.pseudo_modal import residual_corner, residual_static
 from bayes_amb.rotor import full_model
 from bayes_amb.uncertainty import UncertainPlant, lft_reduced, parse_param_list
 
@@ -175,6 +181,20 @@ class ForwardModel:
     at its dt: its rigid-body modes, and the bending pairs inside the loop's control band
     (model_band.choose_model; the paper's 8 states where the band holds none, or
     ``n_bending`` pairs when given); theta enters through the reduced LFT (eqs. 51-52).
+
+    Where the model keeps bending pairs, the modes it leaves out still bend the shaft
+    below their frequencies, and it holds their compliance too: ``static``, their FE
+    static compliance at nominal bearings (reduction.pseudo_modal.residual_static),
+    through one lumped mode per actuator channel (``static_path``: residual_corner,
+    batched.lumped_mode and with_static, 8 states) that follows their rise below the
+    lowest of them and falls above it as they do. On ROSS's test rig the left-out modes
+    (pair 2 at 386/413 Hz and up) add 10 % to the model's compliance at bearing A at the
+    band's top; without it identify's in-band fit put k_Ax and k_Ay about 3 sd low in
+    nine records of ten. A static path through one sample of delay (the form of a mode
+    far above the sampling rate) fits the band too, but its instant step response, which
+    the left-out modes (heavily damped, 386-1144 Hz) do not have, failed the slew-limit
+    screen on 17 of 30 linear records (docs/validation.md). The paper's 8-state model has no such path:
+    there the left-out modes lie far above the band.
     """
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
@@ -199,9 +219,15 @@ class ForwardModel:
             self.band = None
         self.plant: UncertainPlant = lft_reduced(self.reduced, rig, self.params)
         self.dt = dt
+        pairs = tuple(range(1, self.reduced.n_bending + 1))
+        self.static = residual_static(full, pairs) if pairs else None
+        self.static_path = lumped_mode(*residual_corner(full, pairs), dt) if pairs else None
         Ad, Bd = zoh(self.reduced.A, self.reduced.B, dt)
         self.nominal = (Ad, Bd, self.reduced.C)
         self.fast = False
+        # the file's observer is this model's (to a change of basis): the error form
+        # below, and ExtendedForwardModel's observer form, may use it
+        self.observer_ok = False
         if ctrl.kind == "observer":
             # the file's own nominal model and gains: J = [A+BF+LC, [-L, B]; [F; -C], D]
             L = -ctrl.B[:, :4]
@@ -212,7 +238,8 @@ class ForwardModel:
             self.parts = LoopParts(ctrl.A, ctrl.B, ctrl.C, ctrl.D, A, B, C, L, self.port)
             T = state_transform(A, B, C, Ad, Bd, self.reduced.C)
             if T is not None and self.port == "eta":
-                self.fast = True
+                self.observer_ok = True
+                self.fast = self.static is None     # the error form has no static path
                 self.F, self.L = F, L                  # in the file's state basis
                 # the same observer in this model's basis (x_file = T x): F T, T^-1 L
                 self._F, self._L = F @ T, np.linalg.solve(T, L)
@@ -232,20 +259,25 @@ class ForwardModel:
         return validity_hz(self.reduced.full, self.reduced.n_states)
 
     # ------------------------------------------------------------------ plants
-    def plants(self, theta: NDArray) -> tuple[NDArray, NDArray]:
-        """Exactly sampled plants for a batch theta (nb, p): Ap (nb, 8, 8), Bp (nb, 8, 4)."""
+    def plants(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray]:
+        """Exactly sampled plants for a batch theta (nb, p): Ap (nb, n, n), Bp (nb, n, 4)
+        and Cp (4, n); n = 8 + 4 bending pairs (+ 4 states of the static path)."""
         th = np.atleast_2d(np.asarray(theta, dtype=float))
         pl = self.plant
         diag = np.repeat(th, pl.blocks, axis=1)                      # (nb, r)
         if self.engine.compiled_modal:
-            return zoh_compiled(pl.A[None] + (pl.B_w * diag[:, None, :]) @ pl.C_z, pl.B,
-                                self.dt)
-        A = pl.A[None] + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
-        return zoh_batched(A, pl.B, self.dt)
+            Ap, Bp = zoh_compiled(pl.A[None] + (pl.B_w * diag[:, None, :]) @ pl.C_z, pl.B,
+                                  self.dt)
+        else:
+            A = pl.A[None] + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
+            Ap, Bp = zoh_batched(A, pl.B, self.dt)
+        if self.static is None:
+            return Ap, Bp, pl.C
+        return with_static(Ap, Bp, pl.C, self.static, path=self.static_path)
 
     def excitation_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         """(A, B, C) of the map x -> eps for a batch of theta."""
-        Ap, Bp = self.plants(theta)
+        Ap, Bp, Cp = self.plants(theta)
         if self.fast:
             if self.engine.compiled_modal:
                 A_S, B_S, C_S = error_form_compiled(*self._error_parts, Ap, Bp, self._LC)
@@ -253,13 +285,12 @@ class ForwardModel:
                 Ad, Bd, C = self.nominal
                 A_S, B_S, C_S = error_form_matrices(Ad, Bd, C, self._F, self._L, Ap, Bp)
             return A_S, B_S, np.broadcast_to(C_S, (Ap.shape[0], *C_S.shape))
-        A_cl, B_cl, C_cl, _ = loop_matrices(self.parts, Ap, Bp, self.plant.C)
+        A_cl, B_cl, C_cl, _ = loop_matrices(self.parts, Ap, Bp, Cp)
         return A_cl, B_cl[:, :, :4], C_cl
 
     def noise_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray, NDArray]:
         """(A, B, C, D) of [n, r1, r2] -> eps at one theta (the noise filters, eq. 14)."""
-        Ap, Bp = self.plants(np.atleast_2d(theta))
-        A_cl, B_cl, C_cl, D_cl = loop_matrices(self.parts, Ap, Bp, self.plant.C)
+        A_cl, B_cl, C_cl, D_cl = loop_matrices(self.parts, *self.plants(np.atleast_2d(theta)))
         return A_cl[0], B_cl[0][:, 4:], C_cl[0], D_cl[:, 4:]
 
     def modal(self, theta: NDArray, x: NDArray | None = None

@@ -16,7 +16,9 @@ each model is its own: a pair kept inside the band can lift the gain near its fr
 and the band is then read again. On the reference rig the rigid-body loop crosses one
 at 244 Hz and the model is valid to 514 Hz, so it stays the paper's 8-state model (k = 0,
 bit for bit). On ROSS's test rig k = 0 crosses at 105 Hz against a 51 Hz validity band;
-k = 1 crosses at 141 Hz against 193 Hz, and the model keeps pair 1 (12 states).
+k = 1 crosses at 141 Hz against 193 Hz, and the model keeps pair 1 (12 states). A model
+that keeps bending pairs also holds the static compliance of the modes it leaves out
+(ForwardModel.static).
 
 Measured on that rig (own simulator, k_Ax 0.1, k_By -0.1, c_Bx 0.05, 1 s at 10 kHz,
 three seeds, ``identify --map-only`` with its adequacy test): the eight coefficients
@@ -71,7 +73,8 @@ class ModelBand:
             pairs = ", ".join(f"{a:.1f}/{b:.1f} Hz" for a, b in
                               zip(self.bending_hz[::2], self.bending_hz[1::2], strict=True))
             held = (f"the rigid-body modes and bending pair{'s' if self.n_bending > 1 else ''}"
-                    f" 1{f'-{self.n_bending}' if self.n_bending > 1 else ''} ({pairs})")
+                    f" 1{f'-{self.n_bending}' if self.n_bending > 1 else ''} ({pairs}), "
+                    "with the static compliance of the modes it leaves out")
         out = (f"model: {self.n_states} states, {held}; valid to {self.validity_hz:.0f} Hz, "
                f"the loop's gain reaches one up to {self.control_hz:.0f} Hz")
         if self.capped:

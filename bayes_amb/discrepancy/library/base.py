@@ -152,6 +152,8 @@ class ModelContext:
     per model: the bending pairs it keeps (1-based) and ``static_residual`` (4, 4), the
     static contribution in m/A of every FE mode the model leaves out, from actuator current
     to sensor displacement (G_FE(0) - G_model(0) with G(0) = -C A^-1 B, nominal bearings);
+    ``static_in_nominal``: the nominal model holds that static path (ForwardModel.static;
+    a model that keeps bending pairs), so residual_flexibility scales it;
     ``matrices``: the rig's assembled FE matrices (the forces candidates place on nodes).
     """
 
@@ -162,6 +164,7 @@ class ModelContext:
     bending_zeta: tuple[float, ...]
     kept_pairs: tuple[int, ...] = ()
     static_residual: NDArray | None = field(default=None, compare=False, repr=False)
+    static_in_nominal: bool = False
     matrices: RotorMatrices | None = field(default=None, compare=False, repr=False)
 
     def assembled(self) -> RotorMatrices:
@@ -184,6 +187,7 @@ class Candidate:
 
     entry: ClassVar[EffectEntry]
     own_sampling: ClassVar[bool] = False   # samples the plant itself (one per model)
+    scales_static: ClassVar[bool] = False  # its first parameter scales the nominal static path
 
     @property
     def fingerprint(self) -> str:

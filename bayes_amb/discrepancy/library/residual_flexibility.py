@@ -2,11 +2,19 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from bayes_amb.discrepancy.library.base import Candidate, EffectEntry, Quantity, Sampled
+from bayes_amb.discrepancy.library.base import (
+    Candidate,
+    EffectEntry,
+    EffectParam,
+    ModelContext,
+    Quantity,
+    Sampled,
+)
+from bayes_amb.inference.batched import with_static
 from bayes_amb.inference.priors import Prior
 
 
@@ -22,23 +30,29 @@ class ResidualFlexibility(Candidate):
     shows the quasi-static response to the current held over the previous sample,
     y[k] += g D u[k-1]: four states z[k+1] = u[k] appended to the sampled plant (strictly
     proper, as the loop requires). Modes between the kept ones and the Nyquist frequency are
-    dynamic, not static: those are flexible_mode's (one instance per bending pair)."""
+    dynamic, not static: those are flexible_mode's (one instance per bending pair).
+
+    Where the nominal model already holds that compliance (a model that keeps bending
+    pairs, ``ctx.static_in_nominal``: one lumped mode of the left-out modes, ForwardModel),
+    g scales it instead (the model applies it; null 1: the FE value), so the candidate is
+    a correction of the FE compliance, not a second copy."""
+
+    scales_static = True
+
+    def params(self, ctx: ModelContext) -> tuple[EffectParam, ...]:
+        ps = super().params(ctx)
+        return tuple(replace(p, null=1.0) for p in ps) if ctx.static_in_nominal else ps
 
     def structure(self, phi, ctx):
+        if ctx.static_in_nominal:
+            return np.zeros(phi.shape[0], dtype=int)
         return (np.nan_to_num(phi[:, 0]) != 0.0).astype(int)
 
     def discrete(self, Ad, Bd, Cd, phi, ctx):
         g = np.nan_to_num(phi[:, 0])
-        if not np.any(g != 0.0):
+        if ctx.static_in_nominal or not np.any(g != 0.0):
             return Ad, Bd, Cd
-        nb, n, _ = Ad.shape
-        m = Bd.shape[-1]
-        Cd = np.broadcast_to(Cd, (nb, *Cd.shape[-2:]))
-        A2 = np.zeros((nb, n + m, n + m))
-        A2[:, :n, :n] = Ad
-        B2 = np.concatenate([Bd, np.broadcast_to(np.eye(m), (nb, m, m))], axis=1)
-        C2 = np.concatenate([Cd, g[:, None, None] * ctx.static_residual[None]], axis=2)
-        return A2, B2, C2
+        return with_static(Ad, Bd, Cd, ctx.static_residual, g)
 
     def physical(self, draws, ctx):
         ki = np.array([m.ki for m in ctx.rig.channel_magnets])
@@ -64,7 +78,8 @@ ENTRY = EffectEntry(
                  "terms"),
     side="plant", locations=("truncated modes",),
     sampled=(Sampled("residual_scale", Prior("normal", 1.0, 0.5), 0.0, "-",
-                     "scale of the FE static residual (0: none, 1: FE value)"),),
+                     "scale of the FE static residual (0: none, 1: FE value; null 1 where "
+                     "the nominal model holds it)"),),
     physical=(Quantity("scale", "-", "scale of the FE static residual", plausible=(0.25, 4.0),
                        why="the truncated modes' static compliance follows from the FE "
                            "stiffness that also places the kept modes; a factor of 4 "
