@@ -193,8 +193,8 @@ class ForwardModel:
     nine records of ten. A static path through one sample of delay (the form of a mode
     far above the sampling rate) fits the band too, but its instant step response, which
     the left-out modes (heavily damped, 386-1144 Hz) do not have, failed the slew-limit
-    screen on 17 of 30 linear records (docs/validation.md). The paper's 8-state model has no such path:
-    there the left-out modes lie far above the band.
+    screen on 17 of 30 linear records (docs/validation.md). The paper's 8-state model
+    has no such path: there the left-out modes lie far above the band.
     """
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
