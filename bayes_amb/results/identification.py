@@ -204,7 +204,10 @@ class ModelBand(Block):
     control band reaches past the rigid-body model's validity band;
     inference/model_band.py): states, pairs kept and their frequencies (backward and
     forward whirl, Hz), the band the likelihood uses (validity_band_hz), the highest
-    frequency at which the loop gain reaches one (control_band_hz), and the line said."""
+    frequency at which the loop gain reaches one (control_band_hz), and the line said
+    (such a model also holds the static compliance of the modes it leaves out, through
+    one lumped mode: [Your rotor](your_rig.md), "Bending modes inside the control
+    band")."""
 
     states: int
     bending_pairs: int
