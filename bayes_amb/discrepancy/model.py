@@ -79,8 +79,10 @@ class ExtendedForwardModel(ForwardModel):
             self.ctx = model_context(self)
             self._bases: dict[tuple[int, ...], ReducedModel] = {
                 tuple(range(1, self.reduced.n_bending + 1)): self.reduced}
-            # the truncated modes' static compliance per set of kept pairs
-            self._statics: dict[tuple[int, ...], tuple] = {}
+            # the truncated modes' static compliance per set of kept pairs, and its path
+            # where the nominal model holds one (the nominal pairs': ForwardModel's own)
+            self._statics: dict[tuple[int, ...], tuple] = {} if self.static is None else {
+                tuple(range(1, self.reduced.n_bending + 1)): (self.static, self.static_path)}
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
@@ -105,6 +107,7 @@ class ExtendedForwardModel(ForwardModel):
         if pairs not in self._statics:
             full = self.reduced.full
             self._statics[pairs] = (residual_static(full, pairs),
+                                    None if self.static is None else
                                     lumped_mode(*residual_corner(full, pairs), self.dt))
         static, self._static_path = self._statics[pairs]
         # the nominal model's static path (ForwardModel.static) follows the pairs this model

@@ -165,7 +165,6 @@ def zoh_compiled(A: NDArray, B: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     return F, G
 
 
-
 def lumped_mode(omega: NDArray, zeta: NDArray, dt: float
                 ) -> tuple[NDArray, NDArray, NDArray]:
     """(a, b, c) of omega_j^2 / (s^2 + 2 zeta_j omega_j s + omega_j^2), one per channel j,

@@ -368,6 +368,7 @@ def record_check(like: WhittleLikelihood, theta: NDArray, log10_sigma: NDArray,
         check = robust_check(like, theta, log10_sigma, check)
     return check
 
+
 def sandwich_draws(check: NoiseCheck, samples: NDArray, bounds: list[tuple[Any, Any]]
                    ) -> tuple[NDArray, NoiseCheck]:
     """Sampled draws (walkers, draws, dims; theta first) stretched about their mean so that

@@ -187,6 +187,14 @@ def keep_bending_pairs(red: ReducedModel, pairs: tuple[int, ...]) -> ReducedMode
                         n_bending=len(pairs), speed_rpm=red.speed_rpm, full=red.full)
 
 
+def _left_out(fm: FullModel, pairs: tuple[int, ...]) -> tuple[NDArray, NDArray, NDArray]:
+    """The modes a reduction keeping ``pairs`` leaves out: their eigenvalues, C_f v (p, k)
+    and w^T B_f (k, m) with w^T v = 1, so that mode i's residue is C_f v_i w_i^T B_f."""
+    lam, W, V = fm.modes
+    out = np.setdiff1d(np.arange(lam.size), kept_states(pairs))
+    w = W[:, out] / np.sum(W[:, out] * V[:, out], axis=0)
+    return lam[out], fm.C @ V[:, out], w.T @ fm.B
+
 
 def residual_corner(fm: FullModel, pairs: tuple[int, ...] = ()) -> tuple[NDArray, NDArray]:
     """(omega_e rad/s, zeta_e), one per input channel j: a lumped mode
@@ -205,11 +213,8 @@ def residual_corner(fm: FullModel, pairs: tuple[int, ...] = ()) -> tuple[NDArray
     >>> bool(np.all(w / (2 * np.pi) > 1000.0) and np.all((0.0 <= z) & (z < 1.0)))
     True
     """
-    lam, W, V = fm.modes
-    out = np.setdiff1d(np.arange(lam.size), kept_states(pairs))
-    w = W[:, out] / np.sum(W[:, out] * V[:, out], axis=0)
-    lo = lam[out]
-    d = np.einsum("ji,ij->ji", fm.C @ V[:, out], w.T @ fm.B)      # residues (channel, mode)
+    lo, CV, wB = _left_out(fm, pairs)
+    d = np.einsum("ji,ij->ji", CV, wB)                          # residues (channel, mode)
     D = np.real(np.sum(-d / lo, axis=1))
     a1 = np.real(np.sum(-d / lo**2, axis=1)) / D
     a2 = np.real(np.sum(-d / lo**3, axis=1)) / D
@@ -238,7 +243,5 @@ def residual_static(fm: FullModel, pairs: tuple[int, ...] = ()) -> NDArray:
     >>> residual_static(full_model(load_rig())).shape
     (4, 4)
     """
-    lam, W, V = fm.modes
-    out = np.setdiff1d(np.arange(lam.size), kept_states(pairs))
-    w = W[:, out] / np.sum(W[:, out] * V[:, out], axis=0)
-    return np.real(-(fm.C @ V[:, out]) @ ((w.T @ fm.B) / lam[out, None]))
+    lo, CV, wB = _left_out(fm, pairs)
+    return np.real(-CV @ (wB / lo[:, None]))
