@@ -4,12 +4,12 @@ The parameter vector of an extended model is [theta (the stiffness/damping param
 phi_1, phi_2, ...] (each candidate's sampled parameters in turn). The plant for a batch of
 rows is built as
 
-    A0  = nominal reduced A (with the bending pairs the candidates ask for), modal hooks
+    A0  = nominal reduced A (with the bending pairs the candidates ask for), modal hooks,
+          + the modes left out, where the nominal model holds them (ForwardModel.static;
+          for the pairs this model keeps, scaled by residual_flexibility)
     A   = A0 + B_w Theta C_z        (LFT, eqs. 51-52; cross-coupling adds kxy_* columns)
     (A, B, C) -> continuous hooks   (actuator and sensor dynamics add states, ki gain)
     sampled exactly (ZOH, or a candidate's own sampling: fractional delay line)
-    + the static path of the modes left out, where the nominal model holds one
-      (ForwardModel.static; for the pairs this model keeps, scaled by residual_flexibility)
     (Ad, Bd, Cd) -> discrete hooks  (sensor gain)
     + synchronous lines             (unbalance force, runout on the measurement)
 
@@ -26,7 +26,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from bayes_amb.discrepancy.library import Candidate, EffectParam, ModelContext
-from bayes_amb.inference.batched import expm_batched, lumped_mode, with_static, zoh_batched
+from bayes_amb.inference.batched import expm_batched, zoh_batched
 from bayes_amb.inference.forward import ForwardModel, ModalBatch, diagonalise
 from bayes_amb.inference.loop_model import loop_matrices
 from bayes_amb.inference.priors import Prior, PriorSet, default_prior
@@ -36,7 +36,6 @@ from bayes_amb.reduction.pseudo_modal import (
     N_RIGID,
     ReducedModel,
     keep_bending_pairs,
-    residual_corner,
     residual_static,
 )
 from bayes_amb.uncertainty import lft_reduced, parse_param_list
@@ -79,10 +78,10 @@ class ExtendedForwardModel(ForwardModel):
             self.ctx = model_context(self)
             self._bases: dict[tuple[int, ...], ReducedModel] = {
                 tuple(range(1, self.reduced.n_bending + 1)): self.reduced}
-            # the truncated modes' static compliance per set of kept pairs, and its path
-            # where the nominal model holds one (the nominal pairs': ForwardModel's own)
-            self._statics: dict[tuple[int, ...], tuple] = {} if self.static is None else {
-                tuple(range(1, self.reduced.n_bending + 1)): (self.static, self.static_path)}
+            # the truncated modes' static compliance per set of kept pairs (the nominal
+            # pairs': ForwardModel's own)
+            self._statics: dict[tuple[int, ...], NDArray] = {} if self.static is None else {
+                tuple(range(1, self.reduced.n_bending + 1)): self.static}
         # the observer form below needs the controller's own observer = the offline filter
         if template is not None and template.recording is recording:
             self.observer_form = template.observer_form
@@ -105,19 +104,16 @@ class ExtendedForwardModel(ForwardModel):
         self._first = [N_RIGID + 4 * pairs.index(c.bending_pairs()[0]) if c.bending_pairs()
                        else N_RIGID for c in self.candidates]
         if pairs not in self._statics:
-            full = self.reduced.full
-            self._statics[pairs] = (residual_static(full, pairs),
-                                    None if self.static is None else
-                                    lumped_mode(*residual_corner(full, pairs), self.dt))
-        static, self._static_path = self._statics[pairs]
-        # the nominal model's static path (ForwardModel.static) follows the pairs this model
-        # keeps, so that a pair a candidate adds is not counted twice
-        self.ctx = replace(self.ctx, kept_pairs=pairs, static_residual=static,
+            self._statics[pairs] = residual_static(self.reduced.full, pairs)
+        # the modes the nominal model leaves out (ForwardModel.static) follow the pairs this
+        # model keeps, so that a pair a candidate adds is not counted twice
+        self.ctx = replace(self.ctx, kept_pairs=pairs, static_residual=self._statics[pairs],
                            static_in_nominal=self.static is not None)
         lft_names = list(self.theta_names)
         for c in self.candidates:
             lft_names += [n for n in c.lft_names() if n not in lft_names]
-        self.plant = lft_reduced(self.base, recording.rig, tuple(lft_names))
+        self.plant = lft_reduced(self.base, recording.rig, tuple(lft_names),
+                                 keeps=pairs if self.static is not None else None)
         eff: list[EffectParam] = []
         self.slices: list[slice] = []
         for c in self.candidates:
@@ -155,9 +151,17 @@ class ExtendedForwardModel(ForwardModel):
         for i, c in enumerate(self.candidates):
             A = c.modal(A, self.phi(P, i), self.ctx, self._first[i])
         diag = np.repeat(P[:, self._lft_index], pl.blocks, axis=1)
-        A = A + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
         B = np.array(np.broadcast_to(pl.B, (nb, *pl.B.shape)))
         C = np.array(np.broadcast_to(pl.C, (nb, *pl.C.shape)))
+        if self._static_scale is None or pl.n_left_out == 0:
+            A = A + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
+        else:
+            # residual_flexibility's scale g of the left-out modes' compliance, on y and z
+            g = np.nan_to_num(self.phi(P, self._static_scale)[:, 0])[:, None, None]
+            Cz = np.array(np.broadcast_to(pl.C_z, (nb, *pl.C_z.shape)))
+            Cz[:, :, -pl.n_left_out:] *= g
+            C[:, :, -pl.n_left_out:] *= g
+            A = A + np.einsum("ir,br,brj->bij", pl.B_w, diag, Cz)
         for i, c in enumerate(self.candidates):
             A, B, C = c.continuous(A, B, C, self.phi(P, i), self.ctx)
         return A, B, C
@@ -183,11 +187,6 @@ class ExtendedForwardModel(ForwardModel):
         else:
             Ad, Bd = zoh_batched(A, B, self.dt)
             Cd = C
-        if self.ctx.static_in_nominal:
-            i = self._static_scale
-            g = None if i is None else np.nan_to_num(self.phi(P, i)[:, 0])
-            Ad, Bd, Cd = with_static(Ad, Bd, Cd, self.ctx.static_residual, g,
-                                     self._static_path)
         for i, c in enumerate(self.candidates):
             Ad, Bd, Cd = c.discrete(Ad, Bd, Cd, self.phi(P, i), self.ctx)
         return Ad, Bd, Cd

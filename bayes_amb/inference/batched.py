@@ -165,36 +165,13 @@ def zoh_compiled(A: NDArray, B: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     return F, G
 
 
-def lumped_mode(omega: NDArray, zeta: NDArray, dt: float
-                ) -> tuple[NDArray, NDArray, NDArray]:
-    """(a, b, c) of omega_j^2 / (s^2 + 2 zeta_j omega_j s + omega_j^2), one per channel j,
-    sampled exactly by ZOH: unit static gain, strictly proper, block-diagonal (2 states a
-    channel; the path ForwardModel gives the compliance of the modes a reduction leaves
-    out, with_static)."""
-    omega, zeta = np.atleast_1d(omega), np.atleast_1d(zeta)
-    m = omega.size
-    A = np.zeros((2 * m, 2 * m))
-    B = np.zeros((2 * m, m))
-    c = np.zeros((m, 2 * m))
-    for j, (w, z) in enumerate(zip(omega, zeta, strict=True)):
-        A[2 * j:2 * j + 2, 2 * j:2 * j + 2] = [[0.0, 1.0], [-w**2, -2.0 * z * w]]
-        B[2 * j + 1, j] = w**2
-        c[j, 2 * j] = 1.0
-    a, b = zoh_batched(A[None], B, dt)
-    return a[0], b[0], c
-
-
 def with_static(Ad: NDArray, Bd: NDArray, Cd: NDArray, D: NDArray,
-                scale: NDArray | None = None,
-                path: tuple[NDArray, NDArray, NDArray] | None = None
-                ) -> tuple[NDArray, NDArray, NDArray]:
-    """A sampled plant stack (nb, n, n), (nb, n, m), C (p, n) or (nb, p, n) plus a path of
-    static gain D (p, m) from the inputs through a sampled filter ``path`` (a, b, c) of
-    unit static gain from u to its m outputs, its states appended last; y += g D (c z).
-    Default path: one sample of delay, z[k+1] = u[k], y[k] += g D u[k-1], the ZOH-exact
-    form of a mode far above the sampling rate (it settles within a sample). The plant
-    stays strictly proper, as the loop requires. ``scale`` (nb,), default 1: g per row
-    (then C is returned per row).
+                scale: NDArray | None = None) -> tuple[NDArray, NDArray, NDArray]:
+    """A sampled plant stack (nb, n, n), (nb, n, m), C (p, n) or (nb, p, n) plus a static
+    path of gain D (p, m) through one sample of delay: z[k+1] = u[k], y[k] += g D u[k-1],
+    the ZOH-exact form of a mode far above the sampling rate (it settles within a
+    sample). The plant stays strictly proper, as the loop requires. ``scale`` (nb,),
+    default 1: g per row (then C is returned per row).
 
     >>> Ad, Bd = np.full((2, 1, 1), 0.5), np.ones((2, 1, 1))
     >>> A2, B2, C2 = with_static(Ad, Bd, np.ones((1, 1)), np.full((1, 1), 3.0))
@@ -203,16 +180,12 @@ def with_static(Ad: NDArray, Bd: NDArray, Cd: NDArray, D: NDArray,
     """
     nb, n, _ = Ad.shape
     m = Bd.shape[-1]
-    af, bf, c = path if path is not None else (np.zeros((m, m)), np.eye(m), np.eye(m))
-    cf = D @ c
-    q = af.shape[0]
-    A2 = np.zeros((nb, n + q, n + q))
+    A2 = np.zeros((nb, n + m, n + m))
     A2[:, :n, :n] = Ad
-    A2[:, n:, n:] = af
     B2 = np.concatenate([np.broadcast_to(Bd, (nb, n, m)),
-                         np.broadcast_to(bf, (nb, q, m))], axis=1)
+                         np.broadcast_to(np.eye(m), (nb, m, m))], axis=1)
     if scale is None and Cd.ndim == 2:
-        return A2, B2, np.concatenate([Cd, cf], axis=1)
+        return A2, B2, np.concatenate([Cd, D], axis=1)
     g = np.ones(nb) if scale is None else np.asarray(scale, dtype=float)
     Cb = np.broadcast_to(Cd, (nb, *Cd.shape[-2:]))
-    return A2, B2, np.concatenate([Cb, g[:, None, None] * cf[None]], axis=2)
+    return A2, B2, np.concatenate([Cb, g[:, None, None] * D[None]], axis=2)

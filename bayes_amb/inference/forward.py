@@ -23,8 +23,6 @@ from bayes_amb.control.discrete import zoh
 from bayes_amb.errors import RecordingError
 from bayes_amb.inference import kernels
 from bayes_amb.inference.batched import (
-    lumped_mode,
-    with_static,
     zoh_batched,
     zoh_compiled,
 )
@@ -45,7 +43,7 @@ from bayes_amb.inference.triangular import (
 )
 from bayes_amb.io.recording import Recording
 from bayes_amb.reduction import reduce_pseudo_modal
-from bayes_amb.reduction.pseudo_modal import residual_corner, residual_static
+from bayes_amb.reduction.pseudo_modal import residual_static
 from bayes_amb.rotor import full_model
 from bayes_amb.uncertainty import UncertainPlant, lft_reduced, parse_param_list
 
@@ -183,18 +181,21 @@ class ForwardModel:
     ``n_bending`` pairs when given); theta enters through the reduced LFT (eqs. 51-52).
 
     Where the model keeps bending pairs, the modes it leaves out still bend the shaft
-    below their frequencies, and it holds their compliance too: ``static``, their FE
-    static compliance at nominal bearings (reduction.pseudo_modal.residual_static),
-    through one lumped mode per actuator channel (``static_path``: residual_corner,
-    batched.lumped_mode and with_static, 8 states) that follows their rise below the
-    lowest of them and falls above it as they do. On ROSS's test rig the left-out modes
-    (pair 2 at 386/413 Hz and up) add 10 % to the model's compliance at bearing A at the
-    band's top; without it identify's in-band fit put k_Ax and k_Ay about 3 sd low in
-    nine records of ten. A static path through one sample of delay (the form of a mode
-    far above the sampling rate) fits the band too, but its instant step response, which
-    the left-out modes (heavily damped, 386-1144 Hz) do not have, failed the slew-limit
-    screen on 17 of 30 linear records (docs/validation.md). The paper's 8-state model
-    has no such path: there the left-out modes lie far above the band.
+    below their frequencies, and it holds their compliance too, on every path of the LFT
+    (uncertainty.lft.with_left_out; ``static``, their FE static compliance from the
+    currents to the probes at nominal bearings, reduction.pseudo_modal.residual_static):
+    one lumped mode per actuator channel (8 states) that follows their rise below the
+    lowest of them and falls above it as they do, driven by the currents and by the
+    bearing coefficients' forces, and seen by the probes and by the coefficients. On
+    ROSS's test rig the left-out modes (pair 2 at 386/413 Hz and up) add 10 % to the
+    model's compliance at bearing A at the band's top; without it identify's in-band fit
+    put k_Ax and k_Ay about 3 sd low in nine records of ten, and with it on the currents'
+    path only, the dampings at A about 0.4-1 sd low. A path through one sample of delay
+    (the form of a mode far above the sampling rate) fits the band too, but its instant
+    step response, which the left-out modes (heavily damped, 386-1144 Hz) do not have,
+    failed the slew-limit screen on 17 of 30 linear records (docs/validation.md). The
+    paper's 8-state model has no such path: there the left-out modes lie far above the
+    band.
     """
 
     def __init__(self, recording: Recording, params: str | tuple[str, ...],
@@ -217,11 +218,10 @@ class ForwardModel:
         else:
             self.reduced = reduce_pseudo_modal(full, n_bending=n_bending)
             self.band = None
-        self.plant: UncertainPlant = lft_reduced(self.reduced, rig, self.params)
-        self.dt = dt
         pairs = tuple(range(1, self.reduced.n_bending + 1))
+        self.plant: UncertainPlant = lft_reduced(self.reduced, rig, self.params, keeps=pairs)
+        self.dt = dt
         self.static = residual_static(full, pairs) if pairs else None
-        self.static_path = lumped_mode(*residual_corner(full, pairs), dt) if pairs else None
         Ad, Bd = zoh(self.reduced.A, self.reduced.B, dt)
         self.nominal = (Ad, Bd, self.reduced.C)
         self.fast = False
@@ -239,7 +239,7 @@ class ForwardModel:
             T = state_transform(A, B, C, Ad, Bd, self.reduced.C)
             if T is not None and self.port == "eta":
                 self.observer_ok = True
-                self.fast = self.static is None     # the error form has no static path
+                self.fast = self.static is None     # the error form has no left-out modes
                 self.F, self.L = F, L                  # in the file's state basis
                 # the same observer in this model's basis (x_file = T x): F T, T^-1 L
                 self._F, self._L = F @ T, np.linalg.solve(T, L)
@@ -261,7 +261,7 @@ class ForwardModel:
     # ------------------------------------------------------------------ plants
     def plants(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         """Exactly sampled plants for a batch theta (nb, p): Ap (nb, n, n), Bp (nb, n, 4)
-        and Cp (4, n); n = 8 + 4 bending pairs (+ 4 states of the static path)."""
+        and Cp (4, n); n = 8 + 4 bending pairs (+ 8 states of the left-out modes)."""
         th = np.atleast_2d(np.asarray(theta, dtype=float))
         pl = self.plant
         diag = np.repeat(th, pl.blocks, axis=1)                      # (nb, r)
@@ -271,9 +271,7 @@ class ForwardModel:
         else:
             A = pl.A[None] + np.einsum("ir,br,rj->bij", pl.B_w, diag, pl.C_z)
             Ap, Bp = zoh_batched(A, pl.B, self.dt)
-        if self.static is None:
-            return Ap, Bp, pl.C
-        return with_static(Ap, Bp, pl.C, self.static, path=self.static_path)
+        return Ap, Bp, pl.C
 
     def excitation_system(self, theta: NDArray) -> tuple[NDArray, NDArray, NDArray]:
         """(A, B, C) of the map x -> eps for a batch of theta."""

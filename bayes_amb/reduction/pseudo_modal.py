@@ -187,13 +187,14 @@ def keep_bending_pairs(red: ReducedModel, pairs: tuple[int, ...]) -> ReducedMode
                         n_bending=len(pairs), speed_rpm=red.speed_rpm, full=red.full)
 
 
-def _left_out(fm: FullModel, pairs: tuple[int, ...]) -> tuple[NDArray, NDArray, NDArray]:
-    """The modes a reduction keeping ``pairs`` leaves out: their eigenvalues, C_f v (p, k)
-    and w^T B_f (k, m) with w^T v = 1, so that mode i's residue is C_f v_i w_i^T B_f."""
-    lam, W, V = fm.modes
+def _left_out(fm: FullModel, pairs: tuple[int, ...], C: NDArray | None = None
+              ) -> tuple[NDArray, NDArray, NDArray]:
+    """The modes a reduction keeping ``pairs`` leaves out: their eigenvalues, C v (p, k)
+    and w^T B_f (k, m) with w^T v = 1, so that mode i's residue is C v_i w_i^T B_f
+    (C: default C_f, the probes)."""
+    lam, _, V = fm.modes
     out = np.setdiff1d(np.arange(lam.size), kept_states(pairs))
-    w = W[:, out] / np.sum(W[:, out] * V[:, out], axis=0)
-    return lam[out], fm.C @ V[:, out], w.T @ fm.B
+    return lam[out], ((fm.C if C is None else C) @ V)[:, out], fm.mode_inputs[out]
 
 
 def residual_corner(fm: FullModel, pairs: tuple[int, ...] = ()) -> tuple[NDArray, NDArray]:
@@ -226,11 +227,13 @@ def residual_corner(fm: FullModel, pairs: tuple[int, ...] = ()) -> tuple[NDArray
     return omega, zeta
 
 
-def residual_static(fm: FullModel, pairs: tuple[int, ...] = ()) -> NDArray:
+def residual_static(fm: FullModel, pairs: tuple[int, ...] = (), C: NDArray | None = None
+                    ) -> NDArray:
     """Static compliance (4, 4), C_f (-A_f^-1) B_f restricted to the modes that a reduction
     keeping the rigid-body modes and the bending pairs ``pairs`` (1-based) leaves out: the
     residual flexibility of the truncated modes (mode-acceleration method), in m per unit
-    of the input of B_f.
+    of the input of B_f. ``C`` (p, 2 n_q), default C_f: other outputs of the state (the
+    LFT's z, uncertainty.lft.lft_reduced), giving (p, 4).
 
     Summed over the left-out modes, -C_f v w^T B_f / lambda with w^T v = 1. Written as
     (full static) - (kept static) it would be the difference of two numbers ~1e4 apart
@@ -243,5 +246,5 @@ def residual_static(fm: FullModel, pairs: tuple[int, ...] = ()) -> NDArray:
     >>> residual_static(full_model(load_rig())).shape
     (4, 4)
     """
-    lo, CV, wB = _left_out(fm, pairs)
+    lo, CV, wB = _left_out(fm, pairs, C)
     return np.real(-CV @ (wB / lo[:, None]))

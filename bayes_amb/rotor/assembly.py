@@ -206,6 +206,14 @@ class FullModel:
         return lam[order], np.conj(wl[:, order]), vr[:, order]
 
     @cached_property
+    def mode_inputs(self) -> NDArray:
+        """w_i^T B_f per mode (rows in the order of :attr:`modes`), with w_i^T v_i = 1, so
+        that mode i's residue from the inputs to outputs C is C v_i w_i^T B_f. Computed
+        once: every model that holds the left-out modes' compliance uses it."""
+        _, W, V = self.modes
+        return (W / np.sum(W * V, axis=0)).T @ self.B
+
+    @cached_property
     def poles(self) -> NDArray:
         """Open-loop poles, rad/s, sorted by modulus."""
         lam = np.linalg.eigvals(self.A)
