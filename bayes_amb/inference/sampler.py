@@ -243,7 +243,8 @@ def run_emcee(post: LogPosterior, start: NDArray, rng: np.random.Generator, *,
             may_refit = False
             if not tau_max <= REFIT_TAU:
                 center, cov = _pilot_moments(sampler, post.p)
-                try:
+                try:                    # a pilot that did not spread: keep the proposal
+                    np.linalg.cholesky(cov)
                     refit = new_sampler((center, cov))
                 except np.linalg.LinAlgError:
                     refit = None
