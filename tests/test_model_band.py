@@ -176,11 +176,12 @@ def test_residual_flexibility_scales_the_nominal_models_compliance_path():
         Ad, Bd, Cd = fwd.sampled_plants(np.atleast_2d(p))
         return ss_freqresp(Ad[0], Bd[0], Cd[0] if Cd.ndim == 3 else Cd, None, z)
 
-    G0 = response(nominal, [0.0])
+    # with k_Ax off nominal, so that the scale acts on the coefficient's path too
+    G0 = response(nominal, [0.3])
     # the same model, to the rounding of another order of the sums
-    assert response(ext, [0.0, 1.0]) == pytest.approx(G0, rel=1e-7, abs=1e-20)
+    assert response(ext, [0.3, 1.0]) == pytest.approx(G0, rel=1e-7, abs=1e-20)
     fwd = _without_left_out(ForwardModel(rec, ("k_Ax",)))
-    Ap, Bp, Cp = fwd.plants(np.zeros((1, 1)))
+    Ap, Bp, Cp = fwd.plants(np.full((1, 1), 0.3))
     bare = ss_freqresp(Ap[0], Bp[0], Cp, None, z)
-    assert response(ext, [0.0, 0.0]) == pytest.approx(bare, rel=1e-7, abs=1e-20)
+    assert response(ext, [0.3, 0.0]) == pytest.approx(bare, rel=1e-7, abs=1e-20)
     assert np.max(np.abs(G0 - bare) / np.abs(bare)) > 0.01
