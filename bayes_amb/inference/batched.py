@@ -164,28 +164,3 @@ def zoh_compiled(A: NDArray, B: NDArray, dt: float) -> tuple[NDArray, NDArray]:
     _zoh(A, B, float(dt), F, G)
     return F, G
 
-
-def with_static(Ad: NDArray, Bd: NDArray, Cd: NDArray, D: NDArray,
-                scale: NDArray | None = None) -> tuple[NDArray, NDArray, NDArray]:
-    """A sampled plant stack (nb, n, n), (nb, n, m), C (p, n) or (nb, p, n) plus a static
-    path of gain D (p, m) through one sample of delay: z[k+1] = u[k], y[k] += g D u[k-1],
-    the ZOH-exact form of a mode far above the sampling rate (it settles within a
-    sample). The plant stays strictly proper, as the loop requires. ``scale`` (nb,),
-    default 1: g per row (then C is returned per row).
-
-    >>> Ad, Bd = np.full((2, 1, 1), 0.5), np.ones((2, 1, 1))
-    >>> A2, B2, C2 = with_static(Ad, Bd, np.ones((1, 1)), np.full((1, 1), 3.0))
-    >>> A2[0].tolist(), B2[0].tolist(), C2.tolist()
-    ([[0.5, 0.0], [0.0, 0.0]], [[1.0], [1.0]], [[1.0, 3.0]])
-    """
-    nb, n, _ = Ad.shape
-    m = Bd.shape[-1]
-    A2 = np.zeros((nb, n + m, n + m))
-    A2[:, :n, :n] = Ad
-    B2 = np.concatenate([np.broadcast_to(Bd, (nb, n, m)),
-                         np.broadcast_to(np.eye(m), (nb, m, m))], axis=1)
-    if scale is None and Cd.ndim == 2:
-        return A2, B2, np.concatenate([Cd, D], axis=1)
-    g = np.ones(nb) if scale is None else np.asarray(scale, dtype=float)
-    Cb = np.broadcast_to(Cd, (nb, *Cd.shape[-2:]))
-    return A2, B2, np.concatenate([Cb, g[:, None, None] * D[None]], axis=2)

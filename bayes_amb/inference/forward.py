@@ -22,10 +22,7 @@ from bayes_amb.control.design import design_observer_controller
 from bayes_amb.control.discrete import zoh
 from bayes_amb.errors import RecordingError
 from bayes_amb.inference import kernels
-from bayes_amb.inference.batched import (
-    zoh_batched,
-    zoh_compiled,
-)
+from bayes_amb.inference.batched import zoh_batched, zoh_compiled
 from bayes_amb.inference.eigen import final_state, modal_batch
 from bayes_amb.inference.loop_model import (
     LoopParts,

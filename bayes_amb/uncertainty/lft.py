@@ -128,10 +128,14 @@ def with_left_out(plant: UncertainPlant, full_lft: UncertainPlant, full: FullMod
         B_L[2 * j + 1, j] = w
         c_q[j, 2 * j] = 1.0
         c_v[j, 2 * j + 1] = w
+    # one sum over the left-out modes for the probes, z's displacement rows and z's
+    # velocity rows read as displacements
     Cz = full_lft.C_z
+    p, r = full.C.shape[0], Cz.shape[0]
     zero = np.zeros_like(Cz[:, :n_q])
-    D_zq = residual_static(full, keeps, np.hstack([Cz[:, :n_q], zero]))
-    D_zv = residual_static(full, keeps, np.hstack([Cz[:, n_q:], zero]))
+    D = residual_static(full, keeps, np.vstack([full.C, np.hstack([Cz[:, :n_q], zero]),
+                                                np.hstack([Cz[:, n_q:], zero])]))
+    D_y, D_zq, D_zv = D[:p], D[p:p + r], D[p + r:]
     T, *_ = np.linalg.lstsq(full.B, full_lft.B_w, rcond=None)
     off = np.linalg.norm(full.B @ T - full_lft.B_w, axis=0) > 1e-9 * np.linalg.norm(
         full_lft.B_w, axis=0)
@@ -141,7 +145,7 @@ def with_left_out(plant: UncertainPlant, full_lft: UncertainPlant, full: FullMod
     A[:n, :n] = plant.A
     A[n:, n:] = A_L
     return UncertainPlant(A=A, B=np.vstack([plant.B, B_L]),
-                          C=np.hstack([plant.C, residual_static(full, keeps) @ c_q]),
+                          C=np.hstack([plant.C, D_y @ c_q]),
                           B_w=np.vstack([plant.B_w, B_L @ T]),
                           C_z=np.hstack([plant.C_z, D_zq @ c_q + D_zv @ c_v]),
                           names=plant.names, blocks=plant.blocks, n_left_out=2 * m)

@@ -14,7 +14,6 @@ from bayes_amb.discrepancy.library.base import (
     Quantity,
     Sampled,
 )
-from bayes_amb.inference.batched import with_static
 from bayes_amb.inference.priors import Prior
 
 
@@ -52,7 +51,14 @@ class ResidualFlexibility(Candidate):
         g = np.nan_to_num(phi[:, 0])
         if ctx.static_in_nominal or not np.any(g != 0.0):
             return Ad, Bd, Cd
-        return with_static(Ad, Bd, Cd, ctx.static_residual, g)
+        nb, n, _ = Ad.shape
+        m = Bd.shape[-1]
+        Cd = np.broadcast_to(Cd, (nb, *Cd.shape[-2:]))
+        A2 = np.zeros((nb, n + m, n + m))
+        A2[:, :n, :n] = Ad
+        B2 = np.concatenate([Bd, np.broadcast_to(np.eye(m), (nb, m, m))], axis=1)
+        C2 = np.concatenate([Cd, g[:, None, None] * ctx.static_residual[None]], axis=2)
+        return A2, B2, C2
 
     def physical(self, draws, ctx):
         ki = np.array([m.ki for m in ctx.rig.channel_magnets])
