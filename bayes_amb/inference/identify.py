@@ -78,8 +78,11 @@ NOISE_MODEL = ("banded Whittle likelihood; white sensor noise n, r1 and r2 throu
 
 @dataclass
 class IdentifyOptions:
-    """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only, map_method
-    (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max),
+    """walkers (None: max(24, 2 ndim + 2)), steps (None: run to 50 tau), map_only (MAP and
+    Laplace, no sample; without it identify still does not sample where the adequacy test
+    doubts the model, the noise check doubts the noise model, or the record does not
+    inform a coefficient on its prior's bound: the summary's inference_note says which),
+    map_method (lbfgs or nelder-mead), seed, max_steps, progress callback(steps, target, tau_max),
     adequacy (run the diagnosis' data checks and location tests on the same model and
     report the verdict as summary['adequacy'], discrepancy/adequacy.py; one nominal fit),
     noise_model ("loop": the coloured loop noise model; "iid": white Gaussian eps, the naive
@@ -116,11 +119,12 @@ def _absolute(source: str) -> str:
     return str(p.resolve()) if p.is_file() else source
 
 
-def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | None,
+def _laplace_summary(names: tuple[str, ...], center: np.ndarray, cov: np.ndarray | None,
                      rig: Any, prior_set: PriorSet | None = None,
                      bound: np.ndarray | None = None, seed: int = 0
                      ) -> dict[str, dict[str, Any]]:
-    """Per parameter: the MAP, the Laplace sd and the normal 90 % interval about the MAP.
+    """Per parameter: the centre (the MAP, or where bounded.BoundedLaplace.integrated moved
+    it), the Laplace sd and the normal 90 % interval about it.
     A parameter on its prior's bound (``bound``; its curvature left out of ``cov``) gets
     its prior's mean, sd and central 90 % interval instead: the record does not inform it,
     or pushes it past what the prior allows, and either way no narrower interval is known."""
@@ -131,7 +135,7 @@ def _laplace_summary(names: tuple[str, ...], m: MapResult, cov: np.ndarray | Non
             out[n] = draws_row(n, rig, prior_set.priors[j].sample(rng, 20000))
             continue
         sd = float(math.sqrt(cov[j, j])) if cov is not None else float("nan")
-        mean, lo, hi = float(m.theta[j]), m.theta[j] - 1.6449 * sd, m.theta[j] + 1.6449 * sd
+        mean, lo, hi = float(center[j]), center[j] - 1.6449 * sd, center[j] + 1.6449 * sd
         if prior_set is not None:
             mean, sd, lo, hi = within_support(mean, sd, prior_set.priors[j].support)
         out[n] = approximate_row(n, rig, mean, sd, float(lo), float(hi))
@@ -263,30 +267,47 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
     m, spectrum = learned_noise(post, m, opt.map_method) if opt.learn_spectrum else (m, None)
     x_map = np.concatenate([m.theta, m.log10_sigma])
     cov = laplace_covariance(post, x_map)
+    on_bound = cov is None and at_prior_bound(post, x_map)[:post.p].any()
+    bounded = bounded_laplace(post, x_map) if on_bound else None
+    # a coefficient the record does not inform, on its prior's bound: its posterior is its
+    # prior, known without sampling it (the others' integrated over it, below)
+    weak = bounded.weak(prior_set) if bounded is not None else np.zeros(post.p, bool)
+    prior_wide = bool(weak.any())
+    check = _checked(like, m, names, spectrum)
+    # a noise model the check doubts: the sandwich posterior at the MAP (Mueller 2013),
+    # not a sample of a likelihood known to be wrong (module noise_check, docs/identify.md)
+    misspecified = check is not None and check.doubted and cov is not None
     sampled = None
-    if pending is not None and not opt.map_only:    # sampled on speculation, stopped as
-        sampled = _sampled(post, x_map, cov, opt, stop=pending.doubted)  # soon as it doubts
+    if pending is not None and not (opt.map_only or prior_wide or misspecified):
+        # sampled on speculation, stopped as soon as the adequacy test doubts the model
+        sampled = _sampled(post, x_map, cov, opt, stop=pending.doubted)
     drawn = _drawn(like, names, eps, forward, sampled, opt, recording) if sampled else None
     verdict, nominal = pending.result() if pending is not None else (None, None)
     # a model that is not adequate reports the model-error posterior of the adequacy's
     # fit (with_model_error), which sampling this likelihood would not change: not sampled
-    map_only = opt.map_only or (nominal is not None and nominal.model_error is not None)
-    bound = bounded = notes = None
-    if cov is None and map_only and at_prior_bound(post, x_map)[:post.p].any():
+    model_error = nominal is not None and nominal.model_error is not None
+    map_only = opt.map_only or prior_wide or misspecified or model_error
+    bound = notes = None
+    center = m.theta
+    if on_bound and map_only:
         # a parameter ran to its prior bound, where the central stencil leaves the prior:
         # the Laplace approximation truncated to the prior (bounded.py) when every bound
-        # one is informed and near it; else the others' over the free dimensions and the
-        # bound ones' priors (_laplace_summary). With none on a bound the theta Hessian
-        # is the one laplace_covariance tried.
-        bounded = bounded_laplace(post, x_map)
+        # one is informed and near it; else the others' over the free dimensions,
+        # integrated over the priors of those the record does not inform, and the bound
+        # ones' priors (_laplace_summary). With none on a bound the theta Hessian is the
+        # one laplace_covariance tried.
         cut = bounded is not None and not bounded.to_prior(prior_set).any()
         if bounded is not None:
             notes = bounded_notes(names, bounded, prior_set, cut)
         if not cut:
-            bounded = None
             cov, bound = free_theta_covariance(post, x_map)
             if cov is None:
                 bound = None
+            elif bounded is not None:
+                center, cov = bounded.integrated(m.theta, cov, prior_set)
+            bounded = None
+    else:
+        bounded = None
     summary: dict[str, Any] = {
         "format": "bayes-amb-summary/1",
         "package_version": __version__,
@@ -320,30 +341,44 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
             nominal = None
     if map_only:
         summary["inference"] = "MAP with Laplace approximation"
-        if not opt.map_only:
+        if not opt.map_only and model_error:
             summary["inference_note"] = (
                 "not sampled: the model is not adequate, and the intervals reported are "
                 "those of the posterior with the band-wise model error integrated out (the "
                 "adequacy's fit), which a sample of this likelihood would not change; its "
                 "own Laplace intervals are under parameters_model_only")
+        elif not opt.map_only and misspecified and not prior_wide:
+            summary["inference_note"] = (
+                "not sampled: the noise check doubts the noise model (the residual's "
+                "colour is not the model's), so the intervals are the sandwich posterior "
+                "at the MAP (Mueller 2013), which a sample of that likelihood would not "
+                "give: its draws lean where the wrong noise model puts them")
+        elif not opt.map_only:
+            said = [n for n, w in zip(names, weak, strict=True) if w]
+            summary["inference_note"] = (
+                f"not sampled: {', '.join(said)} not informed by the record (the MAP on "
+                "the prior's bound, the sd there at least half the prior's), so "
+                f"{'its posterior is its' if len(said) == 1 else 'their posterior is their'}"
+                " prior's; the others' intervals are the Laplace approximation over them, "
+                "integrated over that prior (linearised). A sample of such a posterior "
+                "took minutes and did not converge.")
         if notes is not None or bound is not None:
             summary["identifiability"] = notes or _bound_notes(names, bound)
         if bounded is not None:
             summary["parameters"] = bounded_summary(names, bounded, recording.rig,
                                                      opt.seed)
         else:
-            summary["parameters"] = _laplace_summary(names, m, cov, recording.rig,
+            summary["parameters"] = _laplace_summary(names, center, cov, recording.rig,
                                                      prior_set, bound, opt.seed)
         if cov is not None and bound is None:   # theta block: derived quantities need
             summary["laplace_cov"] = {          # the correlations, not only the sds
                 "names": list(names), "theta": np.asarray(cov)[:len(names),
                                                                :len(names)].tolist()}
-        check = _checked(like, m, names, spectrum)
         if check is not None and check.widens and cov is not None and bounded is None:
             wide, check = check.sandwich(np.asarray(cov)[:post.p, :post.p])
             if check.doubted:
                 summary["parameters_white_noise"] = summary["parameters"]
-            summary["parameters"] = _laplace_summary(names, m, wide, recording.rig,
+            summary["parameters"] = _laplace_summary(names, center, wide, recording.rig,
                                                      prior_set, bound, opt.seed)
             if "laplace_cov" in summary:
                 summary["laplace_cov"]["theta"] = wide.tolist()
@@ -367,7 +402,6 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
     summary["parameters"] = params_summary
     summary["sampler"] = sampler_block(run, n_walkers, laplace is not None, post.n_evals)
     samples = run.samples
-    check = _checked(like, m, names, spectrum)
     if check is not None and check.widens:
         rows, samples, check = sandwich_rows(check, run, post.bounds()[:post.p],
                                              recording.rig, params_summary)

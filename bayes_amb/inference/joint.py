@@ -282,7 +282,7 @@ def _summary(joint_names: list[str], m: Any, cov: NDArray | None, rig: Any,
     interval, as in identify, never the zero width of a held parameter."""
     out = {}
     for j, n in enumerate(joint_names):
-        one = replace(m, theta=np.array([m.theta[j]]))
+        one = np.array([m.theta[j]])
         c = None if cov is None else np.array([[cov[j, j]]])
         base = n.split("@")[0]
         if prior_set is None or bounds is None:

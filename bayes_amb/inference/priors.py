@@ -120,6 +120,16 @@ class Prior:
         return np.exp(rng.normal(self.a, self.b, size))
 
     @property
+    def mean(self) -> float:
+        if self.kind == "uniform":
+            return 0.5 * (self.a + self.b)
+        if self.kind == "normal" and self.truncated:
+            return float(stats.truncnorm.mean(*self._z, loc=self.a, scale=self.b))
+        if self.kind == "normal":
+            return self.a
+        return math.exp(self.a + 0.5 * self.b**2)
+
+    @property
     def sd(self) -> float:
         if self.kind == "uniform":
             return (self.b - self.a) / math.sqrt(12)
