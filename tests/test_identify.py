@@ -653,3 +653,25 @@ def test_the_gradient_on_a_prior_bound_points_inside():
     assert g == pytest.approx([0.4, -0.2], abs=1e-8)
     _, g = _grad(Post(), np.array([-1.0, 0.5]), h)          # outside: no gradient
     assert np.all(g == 0.0)
+
+
+def test_a_coefficient_the_record_does_not_inform_on_its_bound_is_not_sampled(rig,
+                                                                               observer_1ms):
+    """Only By excited (seed 2): c_Ax, which acts on the A bearing, runs to its bound 0.8
+    with an sd there far above the prior's. Its posterior is its prior, known without
+    sampling it (on foreign process-force records such runs took 81-466 s, one not
+    converged at 20 000 steps): identify's default reports without sampling, c_Ax with
+    its prior's interval and k_By with the Laplace interval integrated over c_Ax's prior,
+    exactly what --map-only reports, and says so."""
+    rec, _ = simulate(rig, observer_1ms, {"k_By": 0.3, "c_Ax": 0.1}, duration=0.5,
+                      channels=("By",), noise_rms=1e-7, r2_rms=0.02, seed=2)
+    res = identify(rec, "k_By,c_Ax", options=IdentifyOptions(seed=2))
+    alone = identify(rec, "k_By,c_Ax", options=IdentifyOptions(map_only=True, seed=2))
+    assert res.map["c_Ax"] == pytest.approx(0.8)
+    assert res.inference == "MAP with Laplace approximation" and res.posterior is None
+    assert res.inference_note.startswith("not sampled: c_Ax not informed by the record")
+    assert res.identifiability["at_prior_bound"] == ["c_Ax"]
+    assert res.parameters["c_Ax"].hdi90 == pytest.approx([-0.72, 0.72], abs=0.01)
+    for n in ("k_By", "c_Ax"):
+        assert res.parameters[n].hdi90 == alone.parameters[n].hdi90, n
+    assert 0 < res.parameters["k_By"].sd < 0.1
