@@ -57,12 +57,12 @@ def test_a_laplace_interval_is_cut_at_the_prior_support():
 
 
 def test_a_free_coordinate_is_integrated_over_the_prior_of_an_uninformed_one():
-    """x1 free, correlated with x0 (correlation 0.9999), which the record barely
-    informs (sd 4 against a uniform(-0.8, 0.8) prior) and whose MAP ran to the bound -0.8. The exact marginal of
-    x1 integrates x1 | x0 over x0's posterior, the normal truncated to the prior: its mean
-    and variance by quadrature. Held at the bound, x1's mean is 1.7 of its marginal sd off;
-    integrated over x0's prior it is within 0.05 of x1's marginal sd (the prior is not
-    quite the truncated normal), and its sd within 2 %."""
+    """x1 free, correlated with x0 (correlation 0.9999), which the record barely informs
+    (sd 4 against a uniform(-0.8, 0.8) prior) and whose MAP ran to the bound -0.8. The
+    exact marginal of x1 integrates x1 | x0 over x0's posterior, the normal truncated to
+    the prior: its mean and variance in closed form. Held at the bound, x1's mean is 1.7
+    of its marginal sd off; integrated over x0's prior it is within 0.05 of x1's marginal
+    sd (the prior is not quite the truncated normal), and its sd within 2 %."""
     from bayes_amb.inference.bounded import BoundedLaplace
     from bayes_amb.inference.priors import PriorSet, parse_prior
 
