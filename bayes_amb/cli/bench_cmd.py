@@ -182,9 +182,9 @@ def _details(d: dict[str, Any]) -> list[str]:
         out.append(f"transient: a record that starts mid-operation (cut 0.3 s after its "
                    f"start), {len(r['sd_ratio'])} coefficients, the user's defaults; fitted "
                    f"by the data check: {r['fitted_by_default']}; sampling "
-                   f"{r['posterior_s_fitted']:.1f} s "
-                   f"({r['evals_fitted']} evaluations) against {r['posterior_s_noise']:.1f} s "
-                   f"({r['evals_noise']}); {'converged' if r['converged'] else 'NOT converged'}"
+                   f"{_sampled(r['posterior_s_fitted'], r['evals_fitted'])} against "
+                   f"{_sampled(r['posterior_s_noise'], r['evals_noise'])}; "
+                   f"{'converged' if r['converged'] else 'NOT converged'}"
                    f"; sd fitted / as noise: {sds}")
     if "rigs" in d:
         r = d["rigs"]
@@ -243,3 +243,8 @@ def run(args: argparse.Namespace) -> int:
     data = report(results, args.quick)
     emit(data, format_text(data), args.json)
     return 0
+
+
+def _sampled(wall_s: float, evals: int) -> str:
+    """A run's sampling time and evaluations, or that it was not sampled (evals 0)."""
+    return f"{wall_s:.1f} s ({evals} evaluations)" if evals else "not sampled"
