@@ -46,7 +46,7 @@ def test_a_laplace_interval_is_cut_at_the_prior_support():
     """identify's normal 90 % interval of a weakly informed coefficient passed the prior's
     bound (c_By [0.10, 1.24] under uniform(-0.8, 0.8)); cut to the support it is the
     truncated normal's, and a well-informed one is left exactly as it was."""
-    from bayes_amb.inference.identify import within_support
+    from bayes_amb.inference.laplace_rows import within_support
 
     mean, sd, lo, hi = within_support(0.67, 0.35, (-0.8, 0.8))
     exact = stats.truncnorm((-0.8 - 0.67) / 0.35, (0.8 - 0.67) / 0.35, loc=0.67, scale=0.35)

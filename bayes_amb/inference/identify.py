@@ -10,7 +10,6 @@ The result is a :class:`bayes_amb.results.Identification` (results/identificatio
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
@@ -18,7 +17,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
@@ -26,7 +24,6 @@ from bayes_amb.inference.bounded import (
     bounded_laplace,
     bounded_notes,
     bounded_summary,
-    sampled_bound_notes,
 )
 from bayes_amb.inference.doubted import with_model_error
 from bayes_amb.inference.estimate import (
@@ -39,8 +36,13 @@ from bayes_amb.inference.estimate import (
     laplace_covariance,
 )
 from bayes_amb.inference.forward import ForwardModel
+from bayes_amb.inference.laplace_rows import (
+    bound_notes,
+    laplace_summary,
+    not_sampled_note,
+    warn_bound,
+)
 from bayes_amb.inference.noise_check import (
-    CHAIN_KEYS,
     NoiseCheck,
     record_check,
     sandwich_rows,
@@ -49,8 +51,6 @@ from bayes_amb.inference.noise_fit import fit_noise_spectrum
 from bayes_amb.inference.offline import dual_youla_eps
 from bayes_amb.inference.pending import Doubted, PendingAdequacy
 from bayes_amb.inference.posterior import (
-    approximate_row,
-    draws_row,
     identifiability,
     summarise,
     to_datatree,
@@ -119,51 +119,6 @@ def _absolute(source: str) -> str:
     return str(p.resolve()) if p.is_file() else source
 
 
-def _laplace_summary(names: tuple[str, ...], center: np.ndarray, cov: np.ndarray | None,
-                     rig: Any, prior_set: PriorSet | None = None,
-                     bound: np.ndarray | None = None, seed: int = 0
-                     ) -> dict[str, dict[str, Any]]:
-    """Per parameter: the centre (the MAP, or where bounded.BoundedLaplace.integrated moved
-    it), the Laplace sd and the normal 90 % interval about it.
-    A parameter on its prior's bound (``bound``; its curvature left out of ``cov``) gets
-    its prior's mean, sd and central 90 % interval instead: the record does not inform it,
-    or pushes it past what the prior allows, and either way no narrower interval is known."""
-    out = {}
-    rng = np.random.default_rng(seed)
-    for j, n in enumerate(names):
-        if bound is not None and prior_set is not None and bound[j]:
-            out[n] = draws_row(n, rig, prior_set.priors[j].sample(rng, 20000))
-            continue
-        sd = float(math.sqrt(cov[j, j])) if cov is not None else float("nan")
-        mean, lo, hi = float(center[j]), center[j] - 1.6449 * sd, center[j] + 1.6449 * sd
-        if prior_set is not None:
-            mean, sd, lo, hi = within_support(mean, sd, prior_set.priors[j].support)
-        out[n] = approximate_row(n, rig, mean, sd, float(lo), float(hi))
-    return out
-
-
-OUTSIDE_SUPPORT = 1e-3
-"""Mass of the Laplace normal outside the prior's support above which it is truncated."""
-
-
-def within_support(mu: float, sd: float, support: tuple[float, float]
-                   ) -> tuple[float, float, float, float]:
-    """The Laplace normal N(mu, sd^2) truncated to the prior's support: its mean, sd and
-    central 90 % interval. The posterior is zero where the prior is; an untruncated normal
-    of a weakly informed coefficient would give an interval past the prior's bound (c_By
-    [0.10, 1.24] under uniform(-0.8, 0.8) on a one-channel record). Unchanged when less
-    than OUTSIDE_SUPPORT of its mass lies outside."""
-    lo, hi = mu - 1.6449 * sd, mu + 1.6449 * sd
-    if not (np.isfinite(sd) and sd > 0):
-        return mu, sd, lo, hi
-    za, zb = (support[0] - mu) / sd, (support[1] - mu) / sd
-    if stats.norm.cdf(za) + stats.norm.sf(zb) < OUTSIDE_SUPPORT:
-        return mu, sd, lo, hi
-    t = stats.truncnorm(za, zb, loc=mu, scale=sd)
-    q05, q95 = (float(q) for q in t.ppf([0.05, 0.95]))
-    return float(t.mean()), float(t.std()), q05, q95
-
-
 def _from_nominal_too(post: LogPosterior, m: MapResult, method: str) -> MapResult:
     """When the MAP has a parameter on its prior bound, search again from the nominal model
     (the noise intensities kept) and keep the better of the two, each with the noise
@@ -196,21 +151,6 @@ def learned_noise(post: LogPosterior, m: MapResult, method: str
 
     _, _, spectrum = fit_noise_spectrum(post.likelihood, m.theta, m.log10_sigma, refit)
     return last[0], spectrum
-
-
-def _bound_notes(names: tuple[str, ...], bound: np.ndarray) -> dict[str, Any]:
-    """The identifiability block of a MAP whose Laplace approximation leaves out the
-    parameters on a prior bound."""
-    at = [n for n, b in zip(names, bound, strict=True) if b]
-    one = len(at) == 1
-    return {"identifiable": False, "at_prior_bound": at,
-            "notes": [f"{', '.join(at)} {'is' if one else 'are'} not identified by these "
-                      f"data: {'its MAP sits' if one else 'their MAPs sit'} on the prior's "
-                      "bound (the record does not inform "
-                      f"{'it' if one else 'them'}, or pushes past the prior), so "
-                      f"{'its interval is' if one else 'their intervals are'} the prior's. "
-                      "Excite the channels they act on, or leave them out of --params "
-                      "(held at the nominal value)."]}
 
 
 @limited_threads
@@ -289,12 +229,13 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
     map_only = opt.map_only or prior_wide or misspecified or model_error
     bound = notes = None
     center = m.theta
+    seen = bounded               # formed once at the MAP; the sampled path's warn_bound too
     if on_bound and map_only:
         # a parameter ran to its prior bound, where the central stencil leaves the prior:
         # the Laplace approximation truncated to the prior (bounded.py) when every bound
         # one is informed and near it; else the others' over the free dimensions,
         # integrated over the priors of those the record does not inform, and the bound
-        # ones' priors (_laplace_summary). With none on a bound the theta Hessian is the
+        # ones' priors (laplace_summary). With none on a bound the theta Hessian is the
         # one laplace_covariance tried.
         cut = bounded is not None and not bounded.to_prior(prior_set).any()
         if bounded is not None:
@@ -351,12 +292,12 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
             summary["inference_note"] = not_sampled_note(
                 [n for n, w in zip(names, weak, strict=True) if w], misspecified)
         if notes is not None or bound is not None:
-            summary["identifiability"] = notes or _bound_notes(names, bound)
+            summary["identifiability"] = notes or bound_notes(names, bound)
         if bounded is not None:
             summary["parameters"] = bounded_summary(names, bounded, recording.rig,
                                                      opt.seed)
         else:
-            summary["parameters"] = _laplace_summary(names, center, cov, recording.rig,
+            summary["parameters"] = laplace_summary(names, center, cov, recording.rig,
                                                      prior_set, bound, opt.seed)
         if cov is not None and bound is None:   # theta block: derived quantities need
             summary["laplace_cov"] = {          # the correlations, not only the sds
@@ -366,7 +307,7 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
             wide, check = check.sandwich(np.asarray(cov)[:post.p, :post.p])
             if check.doubted:
                 summary["parameters_white_noise"] = summary["parameters"]
-            summary["parameters"] = _laplace_summary(names, center, wide, recording.rig,
+            summary["parameters"] = laplace_summary(names, center, wide, recording.rig,
                                                      prior_set, bound, opt.seed)
             if "laplace_cov" in summary:
                 summary["laplace_cov"]["theta"] = wide.tolist()
@@ -399,7 +340,7 @@ def _fitted(recording: Recording, names: tuple[str, ...], prior_set: PriorSet,
     if check is not None:
         summary["noise"]["check"] = check.to_dict()
     summary["identifiability"] = identifiability(samples, names, prior_set)
-    _warn_bound(summary, post, x_map, names, prior_set, recording.rig, opt.seed)
+    warn_bound(summary, post, x_map, names, prior_set, recording.rig, opt.seed, seen)
     summary["converged"] = chains_converged(params_summary, run)   # the sampler's own draws
     with_model_error(summary, nominal, opt.seed)
     summary["wall_s"] = time.perf_counter() - t0
@@ -461,58 +402,11 @@ def _sampled(post: LogPosterior, x_map: np.ndarray, cov: np.ndarray | None,
     return run, n_walkers, laplace
 
 
-def not_sampled_note(weak: list[str], misspecified: bool) -> str:
-    """Why a record was not sampled: coefficients the record does not inform on their
-    prior's bound (``weak``, their posterior is their prior), else a noise model the check
-    doubts. (The joint posterior of several records is still sampled: there the joint
-    sandwich at the joint MAP, each record's noise held at its own MAP, held 24/32 on four
-    three-speed process-force groups where the sampled joint held 30/32.)"""
-    if weak:
-        return (f"not sampled: {', '.join(weak)} not informed by the record (the MAP on "
-                "the prior's bound, the sd there at least half the prior's), so "
-                f"{'its posterior is its' if len(weak) == 1 else 'their posterior is their'}"
-                " prior's; the others' intervals are the Laplace approximation over them, "
-                "integrated over that prior (linearised). A sample of such a posterior "
-                "took minutes and did not converge.")
-    assert misspecified
-    return ("not sampled: the noise check doubts the noise model (the residual's colour "
-            "is not the model's), so the intervals are the sandwich posterior at the MAP "
-            "(Mueller 2013), which a sample of that likelihood would not give: its draws "
-            "lean where the wrong noise model puts them")
-
-
 def _checked(like: WhittleLikelihood, m: MapResult, names: tuple[str, ...],
              spectrum: LearnedSpectrum | None) -> NoiseCheck | None:
     """The noise check at the MAP; with a learned spectrum that it does not doubt, its
     intervals floored by the record's own scores (noise_check.record_check)."""
     return record_check(like, m.theta, m.log10_sigma, names, spectrum is not None)
-
-
-def _warn_bound(summary: dict[str, Any], post: LogPosterior, x_map: np.ndarray,
-                names: tuple[str, ...], prior_set: PriorSet, rig: Any, seed: int) -> None:
-    """A sampled posterior whose MAP has a coefficient on a prior bound, not informed or
-    pushed past (bounded.sampled_bound_notes), unless the draws already said it is not
-    identified: the note says so, and the coefficient reports its prior's interval, as
-    the MAP-only path does (its draws lean on the bound: on 41 foreign process-force
-    records such intervals held the truth in 17 of 32). The sampler's diagnostics stay."""
-    if not at_prior_bound(post, x_map)[:post.p].any():
-        return
-    ident = summary["identifiability"]
-    bl = bounded_laplace(post, x_map)
-    said = {n.split(" ")[0] for n in ident["notes"] if " is not identified" in n}
-    notes = [] if bl is None else [n for n in sampled_bound_notes(names, bl, prior_set)
-                                   if n.split(" ")[0] not in said]
-    if not notes:
-        return
-    ident["notes"] = [*ident["notes"], *notes]
-    ident["identifiable"] = False
-    ident["at_prior_bound"] = [n.split(" ")[0] for n in notes]
-    rng = np.random.default_rng(seed)
-    rows = summary["parameters"]
-    for n in ident["at_prior_bound"]:
-        prior = prior_set.priors[names.index(n)]
-        rows[n] = {**draws_row(n, rig, prior.sample(rng, 20000)),
-                   **{k: rows[n][k] for k in CHAIN_KEYS}}
 
 
 def _result(summary: dict[str, Any], names: tuple[str, ...], m: MapResult, eps: np.ndarray,

@@ -40,12 +40,9 @@ from bayes_amb import __version__
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.inference.bounded import bounded_laplace, bounded_notes, bounded_summary
 from bayes_amb.inference.consistency import agreement
-from bayes_amb.inference.identify import (
-    IdentifyOptions,
-    _laplace_summary,
-    identify,
-)
+from bayes_amb.inference.identify import IdentifyOptions, identify
 from bayes_amb.inference.joint_sampling import JointLogPosterior, sample_joint, sampled_summary
+from bayes_amb.inference.laplace_rows import laplace_summary
 from bayes_amb.inference.noise_check import (
     NoiseCheck,
     joint_check,
@@ -286,10 +283,10 @@ def _summary(joint_names: list[str], m: Any, cov: NDArray | None, rig: Any,
         c = None if cov is None else np.array([[cov[j, j]]])
         base = n.split("@")[0]
         if prior_set is None or bounds is None:
-            out[n] = _laplace_summary((base,), one, c, rig)[base]
+            out[n] = laplace_summary((base,), one, c, rig)[base]
             continue
         held = np.array([_on_bound(m.theta[j], bounds[j])])
-        out[n] = _laplace_summary((base,), one, c, rig,
+        out[n] = laplace_summary((base,), one, c, rig,
                                   PriorSet((base,), (prior_set.priors[j],)), held)[base]
     return out
 
