@@ -30,7 +30,7 @@ demo: $(STAMP)
 	$(VENV)/bin/bayes-amb demo
 
 test: $(STAMP)
-	$(PY) -m pytest -q -n 2
+	$(PY) -m pytest -q -n 2 --dist loadgroup
 
 bench: $(STAMP)
 	$(VENV)/bin/bayes-amb bench

@@ -23,10 +23,9 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 
 from bayes_amb import __version__
 from bayes_amb.discrepancy.adequacy import judge, nominal_assessment
@@ -76,6 +75,9 @@ from bayes_amb.rig import CHANNELS, node_label
 from bayes_amb.threads import limited_threads
 from bayes_amb.uncertainty import parse_param_list
 
+if TYPE_CHECKING:     # xarray (with pandas) takes half a second to import: only where written
+    import xarray as xr
+
 
 @dataclass
 class DiagnoseOptions:
@@ -107,6 +109,7 @@ def residuals_dataset(loc: Location, eps: np.ndarray, residual_before: np.ndarra
     f, p_before = residual_spectrum(residual_before, dt)
     _, p_after = residual_spectrum(residual_after, dt)
     _, p_eps = residual_spectrum(eps, dt)
+    import xarray as xr
     return xr.Dataset(
         {"eps": (("time", "channel"), eps),
          "residual_before": (("time", "channel"), residual_before),

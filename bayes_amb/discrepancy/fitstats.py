@@ -7,10 +7,9 @@ the candidates' parameters are computed draw by draw (e.g. bandwidth = 1/(2 pi t
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 from numpy.typing import NDArray
 from scipy.signal import welch
 
@@ -24,6 +23,9 @@ from bayes_amb.discrepancy.locate import (
 from bayes_amb.inference.posterior import gaussian_draws, stretch_draws
 from bayes_amb.rig import CHANNELS
 from bayes_amb.uncertainty import get_spec
+
+if TYPE_CHECKING:     # xarray (with pandas) takes half a second to import: only where written
+    import xarray as xr
 
 
 def hdi(values: NDArray, prob: float = 0.9) -> list[float]:
@@ -207,6 +209,7 @@ def fit_quality(fitted: FittedModel, eps: NDArray) -> dict[str, Any]:
 def posterior_dataset(fm: FittedModel, n: int = 2000) -> xr.Dataset:
     """``n`` posterior draws of a fitted model (emcee or Laplace, as its attrs say): a run
     folder's models/<model>.nc."""
+    import xarray as xr
     s = draws(fm, n)
     kind = "emcee" if fm.samples is not None else "Laplace approximation at the MAP"
     return xr.Dataset({name: (("draw",), s[:, j]) for j, name in enumerate(fm.names)},

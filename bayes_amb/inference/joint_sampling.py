@@ -17,10 +17,9 @@ times with R-hat <= 1.01 and bulk ESS >= 400 per coefficient.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 from numpy.typing import NDArray
 
 from bayes_amb.errors import BayesAmbError
@@ -35,6 +34,9 @@ from bayes_amb.inference.sampler import (
     sampler_block,
 )
 from bayes_amb.inference.whittle import NOISE_SOURCES, NOISE_UNITS, WhittleLikelihood
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 START_NOISE_SD = 0.01
 """sd (log10 units) of the walkers' start about each record's noise MAP; the burn-in of two

@@ -5,11 +5,9 @@ from __future__ import annotations
 
 import warnings
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import arviz as az
 import numpy as np
-import xarray as xr
 from numpy.typing import NDArray
 
 from bayes_amb.inference.priors import PriorSet
@@ -17,6 +15,9 @@ from bayes_amb.inference.whittle import NOISE_SOURCES, WhittleLikelihood
 from bayes_amb.io.atomic import write_netcdf_atomic
 from bayes_amb.rig import Rig
 from bayes_amb.uncertainty import get_spec
+
+if TYPE_CHECKING:     # ArviZ and xarray (with pandas) take 0.8 s to import: only where drawn
+    import xarray as xr
 
 CHAINS_OVER_DRAWS = "Found chain dimension to be longer than draw dimension"
 """ArviZ's warning where the walkers (the chains) outnumber the draws kept: normal for an
@@ -28,6 +29,7 @@ def walkers_datatree(data: dict, **kwargs) -> xr.DataTree:
     not raised to the user)."""
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=CHAINS_OVER_DRAWS, category=UserWarning)
+        import arviz as az
         return az.from_dict(data, **kwargs)
 
 
@@ -62,6 +64,7 @@ def to_datatree(names: tuple[str, ...], samples: NDArray, log_post: NDArray,
     dims = {"eps": ["time", "channel"], "x": ["time", "channel"], "t": ["time"],
             "band_freq_hz": ["band"], "band_bins": ["band"]}
     coords = {"channel": ["Ax", "Ay", "Bx", "By"], "time": np.arange(eps.shape[0]), **band}
+    import xarray as xr
     dt = walkers_datatree(data, dims=dims, coords=coords)
     dt["log_likelihood"] = xr.DataTree(xr.Dataset(
         {"eps": (("chain", "draw", "band"), log_lik)},
@@ -81,6 +84,7 @@ def save_datatree(dt: xr.DataTree, path: str | Path) -> None:
 def summarise(dt: xr.DataTree, names: tuple[str, ...], tau: NDArray, rig: Rig,
               truth: dict[str, float] | None = None) -> dict[str, dict[str, Any]]:
     """Per parameter: mean, sd, hdi90, ess_bulk, ess_tail, r_hat, tau, unit, physical."""
+    import arviz as az
     s = az.summary(dt, var_names=list(names), ci_prob=0.9, ci_kind="hdi", round_to="none")
     out: dict[str, dict[str, Any]] = {}
     for j, n in enumerate(names):

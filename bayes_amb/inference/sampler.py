@@ -30,7 +30,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-import arviz as az
 import emcee
 import numpy as np
 from numpy.typing import NDArray
@@ -164,6 +163,7 @@ def _retained(sampler: emcee.EnsembleSampler, tau: NDArray, p: int) -> NDArray:
 def _diagnostics_ok(sampler: emcee.EnsembleSampler, tau: NDArray, p: int,
                     r_hat_max: float = 1.01, ess_min: float = 400.0) -> bool:
     """R-hat and bulk ESS of the retained draws of the first p dimensions."""
+    import arviz as az  # 0.8 s to import: only where a chain is judged
     draws = _retained(sampler, tau, p)
     for j in range(p):
         x = draws[:, :, j]

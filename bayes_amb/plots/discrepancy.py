@@ -8,15 +8,17 @@ frequencies in Hz.
 
 from __future__ import annotations
 
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
-import xarray as xr
 from matplotlib.figure import Figure
 
 from bayes_amb.plots.data import _grid
 from bayes_amb.plots.style import styled
 from bayes_amb.rig import CHANNELS
+
+if TYPE_CHECKING:
+    import xarray as xr
 
 # A diagnosis is a bayes_amb.results.Diagnosis and a candidate row its CandidateScore;
 # typed as Any here, since the results call into these plots (Diagnosis.plot).

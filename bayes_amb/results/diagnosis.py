@@ -21,13 +21,12 @@ from dataclasses import field, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Self
 
-import xarray as xr
-
 from bayes_amb.errors import BayesAmbError
 from bayes_amb.results.blocks import Block, block, keyed, omitted, runtime
 from bayes_amb.results.files import read_block, write_result
 
 if TYPE_CHECKING:
+    import xarray as xr
     from matplotlib.figure import Figure
 
     from bayes_amb.discrepancy.locate import Location
@@ -473,6 +472,7 @@ class Diagnosis(Block):
         """The diagnosis a run folder holds (diagnosis.json; residuals.nc and models/*.nc
         when present). A folder without diagnosis.json, or a file of another format, is a
         one-line error naming it."""
+        import xarray as xr
         d = Path(run_dir)
         out = read_block(cls, d / FILE, FORMAT)
         res = d / "residuals.nc"
