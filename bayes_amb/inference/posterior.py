@@ -27,9 +27,9 @@ ensemble sampler's short run (``--steps``), not a mislabelled array, so not show
 def walkers_datatree(data: dict, **kwargs) -> xr.DataTree:
     """az.from_dict for an ensemble's draws, the walkers as the chains (CHAINS_OVER_DRAWS
     not raised to the user)."""
+    import arviz as az
     with warnings.catch_warnings():
         warnings.filterwarnings("ignore", message=CHAINS_OVER_DRAWS, category=UserWarning)
-        import arviz as az
         return az.from_dict(data, **kwargs)
 
 
